@@ -1,0 +1,222 @@
+"""One FMU instance, as the master sees it: fmpy's FMU2Slave plus names, batching and a log.
+
+Everything FMI goes through fmpy. A :class:`Block` resolves variable names (``q[2]``) and
+vector bases (``q`` -> ``q[1]``..``q[n]``) to value references once, keeps every message the FMU
+logs (:attr:`Block.messages`), and raises :class:`FMUError` naming the instance, the call and the
+FMU's last error messages when a call fails.
+"""
+from __future__ import annotations
+
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy import calloc, free
+
+STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
+
+
+@dataclass(frozen=True)
+class LogMessage:
+    instance: str
+    status: str
+    category: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"[{self.status}] {self.instance}: {self.message}"
+
+
+class FMUError(RuntimeError):
+    """A FMU call failed; the message names the instance, the call and what the FMU logged."""
+
+    def __init__(self, block: "Block", call: str, detail: str = ""):
+        logged = [m.message for m in block.messages if m.status in ("ERROR", "FATAL", "DISCARD")]
+        text = f"{block.name}: {call} failed"
+        if detail:
+            text += f" ({detail})"
+        if logged:
+            text += ": " + logged[-1]
+        super().__init__(text)
+        self.block = block.name
+        self.call = call
+        self.logged = logged
+
+
+_INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
+
+
+class Block:
+    """An instantiated co-simulation FMU.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.fmu`` file.
+    name : str
+        Instance name (also used in messages and recorded column names).
+    echo : callable, optional
+        Called with every :class:`LogMessage` as it arrives (default: none; all are kept in
+        :attr:`messages`).
+    """
+
+    def __init__(self, path: str | Path, name: str, echo: Callable[[LogMessage], None] | None = None):
+        self.path = Path(path)
+        self.name = name
+        if not self.path.is_file():
+            raise FileNotFoundError(f"{name}: FMU {self.path} does not exist (run `robofmu build`)")
+        self.md = read_model_description(str(self.path), validate=False)
+        if self.md.coSimulation is None:
+            raise ValueError(f"{name}: {self.path} is not a co-simulation FMU")
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self.messages: list[LogMessage] = []
+        self._echo = echo
+        self._unzipdir = extract(str(self.path))
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:
+            from fmpy.logging import addLoggerProxy
+            from ctypes import byref
+            addLoggerProxy(byref(self._callbacks))
+        except Exception:  # pragma: no cover - fmpy without its logging proxy
+            pass
+        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
+                               modelIdentifier=self.md.coSimulation.modelIdentifier,
+                               instanceName=name)
+        try:
+            self.slave.instantiate(callbacks=self._callbacks, loggingOn=True)
+        except Exception:
+            self.slave.freeLibrary()
+            raise FMUError(self, "fmi2Instantiate") from None
+        self._alive = True
+
+    def _log(self, env, instance, status, category, message):
+        msg = LogMessage(instance.decode(errors="replace") if instance else self.name,
+                         STATUS[status] if 0 <= status < len(STATUS) else str(status),
+                         category.decode(errors="replace") if category else "",
+                         message.decode(errors="replace") if message else "")
+        self.messages.append(msg)
+        if self._echo is not None:
+            self._echo(msg)
+
+    # -- names -------------------------------------------------------------------------------------
+    def variable(self, name: str):
+        try:
+            return self.variables[name]
+        except KeyError:
+            raise KeyError(f"{self.name}: no variable {name!r} in {self.path.name}") from None
+
+    def names(self, base: str) -> list[str]:
+        """``base`` itself if it is a variable, else ``base[1]``, ``base[2]``, ... in order."""
+        if base in self.variables:
+            return [base]
+        found = []
+        for name in self.variables:
+            m = _INDEXED.match(name)
+            if m and m.group(1) == base:
+                found.append((int(m.group(2)), name))
+        if not found:
+            raise KeyError(f"{self.name}: no variable {base!r} (nor {base}[i]) in {self.path.name}")
+        return [n for _, n in sorted(found)]
+
+    def vrs(self, *bases: str) -> list[int]:
+        """Value references of the variables named by ``bases`` (each a name or a vector base)."""
+        return [self.variables[n].valueReference for b in bases for n in self.names(b)]
+
+    # -- life cycle --------------------------------------------------------------------------------
+    def _call(self, call: str, fn, *args):
+        try:
+            return fn(*args)
+        except FMICallException as exc:
+            raise FMUError(self, call, str(exc)) from None
+
+    def initialize(self, start_time: float = 0.0, parameters: dict | None = None,
+                   stop_time: float | None = None) -> None:
+        """setupExperiment, enterInitializationMode, set ``parameters`` (by name), exit."""
+        s = self.slave
+        self._call("fmi2SetupExperiment", s.setupExperiment, None, start_time, stop_time)
+        self._call("fmi2EnterInitializationMode", s.enterInitializationMode)
+        for name, value in (parameters or {}).items():
+            self.set(name, value)
+        self._call("fmi2ExitInitializationMode", s.exitInitializationMode)
+
+    def set(self, name: str, value) -> None:
+        """Set one variable (any type) or a whole vector (``q0`` = [..]) by name."""
+        names = self.names(name)
+        values = list(value) if len(names) > 1 or isinstance(value, (list, tuple)) else [value]
+        if len(values) != len(names):
+            raise ValueError(f"{self.name}: {name} has {len(names)} elements, got {len(values)} values")
+        for n, v in zip(names, values):
+            var = self.variable(n)
+            vr = [var.valueReference]
+            if var.type == "Real":
+                self._call(f"fmi2SetReal({n})", self.slave.setReal, vr, [float(v)])
+            elif var.type == "Boolean":
+                self._call(f"fmi2SetBoolean({n})", self.slave.setBoolean, vr, [bool(v)])
+            elif var.type in ("Integer", "Enumeration"):
+                self._call(f"fmi2SetInteger({n})", self.slave.setInteger, vr, [int(v)])
+            else:
+                self._call(f"fmi2SetString({n})", self.slave.setString, vr, [str(v).encode()])
+
+    def get(self, name: str):
+        """Value of one variable, or list of values of a vector base."""
+        out = []
+        for n in self.names(name):
+            var = self.variable(n)
+            vr = [var.valueReference]
+            if var.type == "Real":
+                out += self._call(f"fmi2GetReal({n})", self.slave.getReal, vr)
+            elif var.type == "Boolean":
+                out += [bool(b) for b in self._call(f"fmi2GetBoolean({n})", self.slave.getBoolean, vr)]
+            elif var.type in ("Integer", "Enumeration"):
+                out += self._call(f"fmi2GetInteger({n})", self.slave.getInteger, vr)
+            else:
+                out += [s.decode() for s in self._call(f"fmi2GetString({n})", self.slave.getString, vr)]
+        return out[0] if name in self.variables else out
+
+    def get_real(self, vrs: list[int]) -> list[float]:
+        return self._call("fmi2GetReal", self.slave.getReal, vrs)
+
+    def set_real(self, vrs: list[int], values) -> None:
+        self._call("fmi2SetReal", self.slave.setReal, vrs, values)
+
+    def do_step(self, t: float, h: float) -> None:
+        self._call(f"fmi2DoStep(t = {t:.9g} s, h = {h:.9g} s)", self.slave.doStep, t, h)
+
+    def get_state(self):
+        return self._call("fmi2GetFMUstate", self.slave.getFMUState)
+
+    def set_state(self, state) -> None:
+        self._call("fmi2SetFMUstate", self.slave.setFMUState, state)
+
+    def free_state(self, state) -> None:
+        self._call("fmi2FreeFMUstate", self.slave.freeFMUState, state)
+
+    def close(self) -> None:
+        """Terminate and free the instance; remove its extracted files. Safe to call twice."""
+        if not self._alive:
+            return
+        self._alive = False
+        try:
+            self.slave.terminate()
+        except Exception:
+            pass
+        try:
+            self.slave.freeInstance()
+        except Exception:
+            pass
+        shutil.rmtree(self._unzipdir, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

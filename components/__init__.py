@@ -43,13 +43,13 @@ def source_hash(package_dir: str | Path) -> str:
 SOURCE_HASH = source_hash(_PACKAGE_DIR)
 
 
-def check_bundle(script_file: str | Path) -> None:
-    """Fail loudly if the copy bundled beside ``script_file`` is not the one loaded.
+def check_bundle(resources: str | Path) -> None:
+    """Fail loudly if the copy bundled in a FMU's ``resources`` folder is not the one loaded.
 
-    Called by every generated FMU script. ``script_file`` lies in the FMU's ``resources``
-    folder, next to ``robofmu/components``.
+    Called when every block instance is created, with the instance's resources folder (which
+    holds ``robofmu/components``).
     """
-    bundled = Path(script_file).resolve().parent / "robofmu" / "components"
+    bundled = Path(resources).resolve() / "robofmu" / "components"
     if not bundled.is_dir():
         raise ImportError(f"robofmu: FMU resources lack the bundled package at {bundled}")
     if bundled == _PACKAGE_DIR:

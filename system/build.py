@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -27,8 +28,6 @@ _SCRIPT = '''"""robofmu FMU script: robot {robot!r}, block {block!r}. Generated 
 # pythonfmu 0.7.0's loader drops a reference to this module's globals per instance; keep one
 # (see robofmu.components.fmi.base._balance_pythonfmu_refcount).
 _keepalive = globals()
-from robofmu.components import check_bundle as _check_bundle
-_check_bundle(__file__)
 from robofmu.components.fmi.{module} import {cls} as Fmi2Slave
 
 
@@ -80,8 +79,16 @@ def build(robot: str, out_dir: str | Path = "fmus", blocks: list[str] | None = N
             script.write_text(_SCRIPT.format(robot=robot, block=block, module=module, cls=cls,
                                              identifier=identifier))
             target = dest / f"{block}.fmu"
-            FmuBuilder.build_FMU(script, dest=target, project_files=[staging / "robofmu"],
-                                 canGetAndSetFMUstate=True, canSerializeFMUstate=True)
+            try:
+                FmuBuilder.build_FMU(script, dest=target, project_files=[staging / "robofmu"],
+                                     canGetAndSetFMUstate=True, canSerializeFMUstate=True)
+            finally:
+                # pythonfmu's builder imports the script and leaves it (and its folder on
+                # sys.path) behind; a FMU instantiated later in this process would then reuse
+                # that stale module instead of its own resources.
+                sys.modules.pop(identifier, None)
+                while str(staging) in sys.path:
+                    sys.path.remove(str(staging))
             log(f"built {target}  (model identifier {identifier})")
             built.append(target)
     return built

@@ -36,13 +36,14 @@ class LogMessage:
 class FMUError(RuntimeError):
     """A FMU call failed; the message names the instance, the call and what the FMU logged."""
 
-    def __init__(self, block: "Block", call: str, detail: str = ""):
-        logged = [m.message for m in block.messages if m.status in ("ERROR", "FATAL", "DISCARD")]
+    def __init__(self, block: "Block", call: str, detail: str = "", since: int = 0):
+        logged = [m.message for m in block.messages[since:]
+                  if m.status in ("ERROR", "FATAL", "DISCARD")]
         text = f"{block.name}: {call} failed"
         if detail:
             text += f" ({detail})"
         if logged:
-            text += ": " + logged[-1]
+            text += ": " + " | ".join(logged)
         super().__init__(text)
         self.block = block.name
         self.call = call
@@ -133,10 +134,11 @@ class Block:
 
     # -- life cycle --------------------------------------------------------------------------------
     def _call(self, call: str, fn, *args):
+        since = len(self.messages)
         try:
             return fn(*args)
         except FMICallException as exc:
-            raise FMUError(self, call, str(exc)) from None
+            raise FMUError(self, call, str(exc), since) from None
 
     def initialize(self, start_time: float = 0.0, parameters: dict | None = None,
                    stop_time: float | None = None) -> None:
@@ -164,7 +166,7 @@ class Block:
             elif var.type in ("Integer", "Enumeration"):
                 self._call(f"fmi2SetInteger({n})", self.slave.setInteger, vr, [int(v)])
             else:
-                self._call(f"fmi2SetString({n})", self.slave.setString, vr, [str(v).encode()])
+                self._call(f"fmi2SetString({n})", self.slave.setString, vr, [str(v)])
 
     def get(self, name: str):
         """Value of one variable, or list of values of a vector base."""
@@ -179,7 +181,8 @@ class Block:
             elif var.type in ("Integer", "Enumeration"):
                 out += self._call(f"fmi2GetInteger({n})", self.slave.getInteger, vr)
             else:
-                out += [s.decode() for s in self._call(f"fmi2GetString({n})", self.slave.getString, vr)]
+                out += [v.decode() if isinstance(v, bytes) else v
+                        for v in self._call(f"fmi2GetString({n})", self.slave.getString, vr)]
         return out[0] if name in self.variables else out
 
     def get_real(self, vrs: list[int]) -> list[float]:
@@ -192,13 +195,13 @@ class Block:
         self._call(f"fmi2DoStep(t = {t:.9g} s, h = {h:.9g} s)", self.slave.doStep, t, h)
 
     def get_state(self):
-        return self._call("fmi2GetFMUstate", self.slave.getFMUState)
+        return self._call("fmi2GetFMUstate", self.slave.getFMUstate)
 
     def set_state(self, state) -> None:
-        self._call("fmi2SetFMUstate", self.slave.setFMUState, state)
+        self._call("fmi2SetFMUstate", self.slave.setFMUstate, state)
 
     def free_state(self, state) -> None:
-        self._call("fmi2FreeFMUstate", self.slave.freeFMUState, state)
+        self._call("fmi2FreeFMUstate", self.slave.freeFMUstate, state)
 
     def close(self) -> None:
         """Terminate and free the instance; remove its extracted files. Safe to call twice."""

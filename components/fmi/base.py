@@ -27,7 +27,7 @@ from pythonfmu import Boolean, Fmi2Slave, Integer, Real, String
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
 
-from .. import SOURCE_HASH
+from .. import SOURCE_HASH, check_bundle
 from ..robot import load_spec
 
 #: SI base-unit exponents of every unit a block may use (FMI 2.0 UnitDefinitions).
@@ -92,6 +92,8 @@ class BlockSlave(Fmi2Slave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         _balance_pythonfmu_refcount(type(self))
+        if self.resources:
+            check_bundle(self.resources)
         if not self.robot_name:
             raise TypeError(f"{type(self).__name__}: robot_name is not set")
         self.spec = load_spec(self.robot_name)
@@ -215,15 +217,14 @@ class BlockSlave(Fmi2Slave):
     def get_real(self, vrs):
         if self._dirty and self.feedthrough and self._initialized:
             self._evaluate_safely()
-        try:
-            return self.r[vrs].tolist()
-        except IndexError:
-            raise TypeError(f"{self.instance_name}: unknown value reference in {list(vrs)}") from None
+        if not self._real[vrs].all():
+            self._raise_to_importer(f"fmi2GetReal: value references {list(vrs)} are not all Reals")
+        return self.r[vrs].tolist()
 
     def set_real(self, vrs, values):
         if not self._settable_real[vrs].all():
             bad = [self._names[v] for v in vrs if not self._settable_real[v]]
-            raise TypeError(f"{self.instance_name}: cannot set {bad}: not a Real input or parameter")
+            self._raise_to_importer(f"fmi2SetReal: cannot set {bad}: not a Real input or parameter")
         self.r[vrs] = values
         self._dirty = True
 
@@ -290,12 +291,25 @@ class BlockSlave(Fmi2Slave):
     def exit_initialization_mode(self):
         try:
             self.initialize()
-        except Exception as exc:  # reported as fmi2Fatal by pythonfmu, with this text
-            message = f"{self.instance_name}: initialization failed: {exc}"
-            self.log(message, Fmi2Status.error)
-            raise RuntimeError(message) from None
+        except Exception as exc:
+            self._raise_to_importer(f"initialization failed: {exc}")
         self._initialized = True
         self._dirty = True
+
+    def _raise_to_importer(self, message: str):
+        """Log ``message`` as an error, then make the current FMI call fail.
+
+        pythonfmu 0.7.0 ignores return values outside doStep, so raising is the only way to
+        return a non-OK status (it becomes fmi2Fatal). Its exception handler delivers the
+        logged message, but drops the exception text ("unknown error") and releases the
+        instance, its class and its log queue once more than it took them (they are released
+        again when the instance is freed): take those references first, so that freeing the
+        instance later does not crash the process.
+        """
+        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
+        for obj in (self, self.log_queue, type(self)):
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+        raise RuntimeError(f"{self.instance_name}: {message}")
 
     def _evaluate_safely(self) -> None:
         bad = self.nonfinite_input()
@@ -326,6 +340,7 @@ class BlockSlave(Fmi2Slave):
         if ok:
             self.time = current_time + step_size
             self._held_warned = False
+            self._dirty = True      # internal state moved on: outputs at t + h are due
         return ok
 
     # -- FMU state ------------------------------------------------------------------------------------

@@ -1,0 +1,143 @@
+"""Bad input: clear errors naming the parameter or variable, FMI error statuses, nothing lost."""
+import shutil
+import zipfile
+
+import numpy as np
+import pytest
+
+from robofmu.system.fmu import Block, FMUError
+
+from fmu_util import open_block
+
+
+def _failed_init(fmu_dir, block, parameters):
+    b = Block(fmu_dir / f"{block}.fmu", block)
+    with pytest.raises(FMUError) as info:
+        b.initialize(0.0, parameters)
+    b.close()
+    return str(info.value), b.messages
+
+
+@pytest.mark.parametrize("block, parameters, names", [
+    ("plant", {"payload_mass": -0.03}, "parameter payload_mass = -0.03 kg is invalid: must be >= 0"),
+    ("plant", {"g": float("nan")}, "parameter g = nan"),
+    ("plant", {"max_substep": 0.0}, "parameter max_substep = 0 s is invalid: must be > 0"),
+    ("plant", {"q0[2]": float("inf")}, "parameter q0[2] = inf is invalid"),
+    ("controller", {"kp": -400.0}, "parameter kp = -400 is invalid: must be >= 0"),
+    ("controller", {"kd": float("nan")}, "parameter kd = nan"),
+    ("controller", {"ki": -1.0}, "parameter ki = -1"),
+    ("trajectory", {"waypoints": "0.21 0 0; 0.21 0 zero"}, "waypoints: malformed number"),
+    ("trajectory", {"waypoints": "0.21 0 0; 0.21 0"}, "waypoints: rows must all have the same number"),
+    ("trajectory", {"durations": "1 3 0 1 2 1 1"}, "durations: every move must take a positive"),
+    ("trajectory", {"durations": "1 3 1 -1 2 1 1"}, "durations: every move must take a positive"),
+    ("trajectory", {"durations": "1 3 1"}, "durations: need one duration per move (7), got 3"),
+    ("trajectory", {"cruise_factor": 3.0}, "cruise_factor: must lie in (1, 2]"),
+    ("trajectory", {"pause": -0.5}, "pause: must be >= 0 s"),
+    ("trajectory", {"grip_close_after_move": 9}, "grip_close_after_move: must be 0 (never) or a move number 1..7"),
+    ("ik", {"elbow": "sideways"}, "elbow: unknown option 'sideways'"),
+])
+def test_invalid_parameter_fails_initialization_naming_it(fmu_dir, block, parameters, names):
+    text, messages = _failed_init(fmu_dir, block, parameters)
+    assert "fmi2ExitInitializationMode failed" in text
+    assert "fatal" in text                       # pythonfmu reports a raised error as fmi2Fatal
+    assert names in text
+    assert any(names in m.message and m.status in ("ERROR", "FATAL") for m in messages)
+
+
+@pytest.mark.parametrize("block, variable", [
+    ("controller", "q[2]"), ("controller", "qdd_ref[4]"), ("ik", "x_ref[1]"), ("ik", "xd_ref[3]"),
+    ("plant", "tau[3]"),
+])
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_nonfinite_input_fails_the_step_naming_the_variable(fmu_dir, block, variable, value):
+    b = open_block(fmu_dir, block)
+    b.do_step(0.0, 0.01)
+    outputs = {"controller": "tau", "ik": "q_ref", "plant": "q"}[block]
+    before = b.get(outputs)
+    b.set(variable, value)
+    held = b.get(outputs)                    # no NaN leaves the block
+    assert np.all(np.isfinite(held)) and held == before
+    with pytest.raises(FMUError) as info:
+        b.do_step(0.01, 0.01)
+    text = str(info.value)
+    assert f"input {variable} = {value} at t = 0.01 s is not finite; step refused" in text
+    assert "discard" in text                     # pythonfmu maps a refused step to fmi2Discard
+    assert any(m.status == "ERROR" and variable in m.message for m in b.messages)
+    b.close()
+
+
+def test_unreachable_target_warns_holds_and_recovers(fmu_dir):
+    ik = open_block(fmu_dir, "ik")
+    ik.set("x_ref", [0.25, 0.1, 0.12])
+    ik.set("xd_ref", [0.01, 0.0, 0.0])
+    good = ik.get("q_ref")
+    assert ik.get("reachable") is True
+    ik.do_step(0.0, 0.01)
+    ik.set("x_ref", [0.9, 0.1, 0.12])            # beyond a2 + a3 from the shoulder
+    assert ik.get("reachable") is False
+    assert ik.get("q_ref") == good               # last valid solution held
+    assert ik.get("qd_ref") == [0.0] * 4 and ik.get("qdd_ref") == [0.0] * 4
+    ik.do_step(0.01, 0.01)                       # a warning, not a failure
+    warnings = [m for m in ik.messages if m.status == "WARNING"]
+    assert len(warnings) == 1 and "out of reach" in warnings[0].message
+    assert "holding the last valid solution" in warnings[0].message
+    ik.set("x_ref", [0.26, 0.1, 0.12])
+    assert ik.get("reachable") is True and ik.get("q_ref") != good
+    ik.close()
+
+
+def test_diverging_plant_fails_with_time_and_joint(fmu_dir):
+    plant = open_block(fmu_dir, "plant")
+    for k in range(3):
+        plant.do_step(k * 1e-3, 1e-3)
+    q_before = plant.get("q")
+    plant.set("tau", [0.0, 1e200, 0.0, 0.0])
+    with pytest.raises(FMUError) as info:
+        plant.do_step(0.003, 1e-3)
+    text = str(info.value)
+    assert "became non-finite during the step from t = 0.003 s to 0.004 s (joint" in text
+    assert plant.get("q") == q_before            # the state before the failing step is kept
+    plant.close()
+
+
+def test_exception_inside_a_step_is_logged_with_its_text():
+    """Any Python exception in a step reaches the importer as a logged error with its text."""
+    from pythonfmu.enums import Fmi2Status
+
+    from robofmu.components.fmi.controller import ControllerSlave
+
+    class Slave(ControllerSlave):
+        robot_name = "chess"
+
+    s = Slave(instance_name="c")
+    s.exit_initialization_mode()
+
+    def broken(*_):
+        raise ZeroDivisionError("the integrator met a zero")
+
+    s.law.advance = broken
+    assert s.do_step(0.0, 0.01) is False
+    (msg,) = s.log_queue
+    assert msg.status == Fmi2Status.error
+    assert "ZeroDivisionError: the integrator met a zero" in msg.msg and "Traceback" in msg.msg
+
+
+def test_bundled_code_mismatch_fails_loudly(fmu_dir, tmp_path):
+    """A FMU built from other robofmu sources than the loaded ones refuses to instantiate."""
+    src, dst = fmu_dir / "controller.fmu", tmp_path / "controller.fmu"
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename.endswith("robofmu/components/control.py"):
+                data += b"\n# edited after the build\n"
+            zout.writestr(item, data)
+    with pytest.raises(FMUError) as info:
+        Block(dst, "controller")
+    text = str(info.value)
+    assert "fmi2Instantiate failed" in text
+    assert "rebuild the FMUs with the same robofmu" in text
+
+
+def test_missing_fmu_is_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="plant: FMU .*nope.fmu does not exist"):
+        Block(tmp_path / "nope.fmu", "plant")

@@ -1,0 +1,127 @@
+"""A block diagram: blocks (FMU file, instance name, parameters) and the wires between them.
+
+Wires name variables by instance and variable; a vector base wires every index at once:
+``"ik.q_ref -> controller.q_ref"`` connects ``q_ref[1]`` .. ``q_ref[n]``. A diagram is built in
+Python or read from a declarative experiment file (TOML) under ``system/experiments/``.
+"""
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+_WIRE = re.compile(r"^\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*->\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*$")
+
+
+@dataclass
+class BlockSpec:
+    """One FMU instance of the diagram.
+
+    Parameters
+    ----------
+    name : str
+        Instance name (unique in the diagram; prefixes recorded columns: ``plant.q[2]``).
+    fmu : str or Path
+        The FMU file. A relative path is resolved against the diagram's ``fmu_dir``.
+    parameters : dict
+        Start values to set before initialization, by variable name or vector base.
+    """
+
+    name: str
+    fmu: str | Path
+    parameters: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Wire:
+    """``src.src_var -> dst.dst_var`` (variable names or vector bases)."""
+
+    src: str
+    src_var: str
+    dst: str
+    dst_var: str
+
+    @classmethod
+    def parse(cls, text: str) -> "Wire":
+        m = _WIRE.match(text)
+        if not m:
+            raise ValueError(f"connection {text!r}: expected 'block.variable -> block.variable'")
+        return cls(*m.groups())
+
+    def __str__(self) -> str:
+        return f"{self.src}.{self.src_var} -> {self.dst}.{self.dst_var}"
+
+
+@dataclass
+class System:
+    """Blocks and wires, plus what an experiment needs to run them.
+
+    Parameters
+    ----------
+    blocks : list of BlockSpec
+    wires : list of Wire or str
+    fmu_dir : str or Path
+        Folder relative FMU paths are resolved against (default: ``fmus``).
+    name, description : str
+    stop_time, step : float
+        Default run length and communication step (s).
+    algorithm : {"gauss-seidel", "jacobi"}
+    """
+
+    blocks: list[BlockSpec]
+    wires: list[Wire]
+    fmu_dir: Path = Path("fmus")
+    name: str = "system"
+    description: str = ""
+    stop_time: float = 1.0
+    step: float = 1e-3
+    algorithm: str = "gauss-seidel"
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.wires = [Wire.parse(w) if isinstance(w, str) else w for w in self.wires]
+        self.fmu_dir = Path(self.fmu_dir)
+        names = [b.name for b in self.blocks]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"{self.name}: instance names must be unique, repeated: {', '.join(dupes)}")
+
+    def block(self, name: str) -> BlockSpec:
+        for b in self.blocks:
+            if b.name == name:
+                return b
+        raise KeyError(f"{self.name}: no block {name!r}")
+
+    def fmu_path(self, block: BlockSpec) -> Path:
+        path = Path(block.fmu)
+        return path if path.is_absolute() else self.fmu_dir / path
+
+    @classmethod
+    def from_dict(cls, data: dict, fmu_dir: str | Path | None = None) -> "System":
+        """Build from the structure of an experiment file (see ``system/experiments/``)."""
+        known = {"name", "description", "stop_time", "step", "algorithm", "blocks", "connections", "fmu_dir"}
+        blocks = [BlockSpec(b["name"], b["fmu"], dict(b.get("parameters", {}))) for b in data["blocks"]]
+        return cls(blocks=blocks, wires=list(data.get("connections", [])),
+                   fmu_dir=Path(fmu_dir if fmu_dir is not None else data.get("fmu_dir", "fmus")),
+                   name=data.get("name", "system"), description=data.get("description", ""),
+                   stop_time=float(data.get("stop_time", 1.0)), step=float(data.get("step", 1e-3)),
+                   algorithm=data.get("algorithm", "gauss-seidel"),
+                   extra={k: v for k, v in data.items() if k not in known})
+
+    @classmethod
+    def from_file(cls, path: str | Path, fmu_dir: str | Path | None = None) -> "System":
+        """Read a TOML experiment file."""
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+        return cls.from_dict(data, fmu_dir)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "description": self.description, "stop_time": self.stop_time,
+                "step": self.step, "algorithm": self.algorithm,
+                "blocks": [{"name": b.name, "fmu": str(b.fmu), "parameters": dict(b.parameters)}
+                           for b in self.blocks],
+                "connections": [str(w) for w in self.wires], **self.extra}

@@ -1,0 +1,469 @@
+"""The co-simulation master: checks a diagram, initializes its FMUs and steps them.
+
+At every communication point t the master evaluates the diagram in dependency order
+(Gauss-Seidel: a direct-feedthrough block reads inputs its upstream blocks produced at t, so
+trajectory -> ik -> controller -> plant has no step of delay), records every output, then calls
+doStep(t, h) on each block. The Jacobi option reads all outputs first and then sets all inputs,
+so each feedthrough block lags one step (for comparison).
+
+Values move between FMUs through preallocated buffers: one batched fmi2GetReal per block into a
+signal vector, one batched fmi2SetReal per block from it; nothing is allocated per step.
+"""
+from __future__ import annotations
+
+import csv
+import ctypes
+import fnmatch
+import math
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2True
+
+from .diagram import System, Wire
+from .fmu import Block, FMUError, LogMessage
+
+ALGORITHMS = ("gauss-seidel", "jacobi")
+
+
+class DiagramError(ValueError):
+    """The diagram cannot run; ``problems`` lists every reason, each naming blocks and variables."""
+
+    def __init__(self, system: str, problems: list[str]):
+        super().__init__(f"{system}: the diagram cannot run:\n  - " + "\n  - ".join(problems))
+        self.problems = problems
+
+
+class SimulationError(RuntimeError):
+    """A run failed; ``result`` holds everything recorded up to the failure."""
+
+    def __init__(self, message: str, block: str | None, time: float | None, result: "Result | None"):
+        super().__init__(message)
+        self.block = block
+        self.time = time
+        self.result = result
+
+
+@dataclass
+class Result:
+    """Recorded signals: ``time`` (n,) in s and ``data`` (n, m), one column per signal."""
+
+    time: np.ndarray
+    columns: list[str]
+    data: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.data[:, self.columns.index(name)]
+        except ValueError:
+            raise KeyError(f"no recorded signal {name!r}") from None
+
+    def vector(self, name: str) -> np.ndarray:
+        """All indices of a recorded vector, e.g. ``plant.q`` -> shape (n, 4)."""
+        cols = [i for i, c in enumerate(self.columns) if c.startswith(name + "[")]
+        if not cols:
+            raise KeyError(f"no recorded vector {name!r}")
+        return self.data[:, cols]
+
+    def to_csv(self, path: str | Path) -> Path:
+        """``time`` then one column per signal (``instance.variable``), full precision."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["time", *self.columns])
+            for t, row in zip(self.time, self.data):
+                w.writerow([repr(float(t)), *(repr(float(v)) for v in row)])
+        return path
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> "Result":
+        with Path(path).open() as f:
+            rows = list(csv.reader(f))
+        data = np.array([[float(v) for v in r] for r in rows[1:]]).reshape(-1, len(rows[0]))
+        return cls(data[:, 0], rows[0][1:], data[:, 1:])
+
+
+class _Port:
+    """Preallocated ctypes views for one batched get or set of one type on one block."""
+
+    def __init__(self, vrs: list[int], buffer: np.ndarray, ctype):
+        self.n = len(vrs)
+        self.vr = (ctypes.c_uint * max(self.n, 1))(*vrs)
+        self.buffer = buffer
+        self.c = (ctype * self.n).from_buffer(buffer) if self.n else None
+
+
+@dataclass
+class _Node:
+    spec: object
+    path: Path
+    md: object
+    variables: dict
+    feedthrough: dict = field(default_factory=dict)   # output name -> set of input names
+
+
+class Master:
+    """Runs a :class:`System`.
+
+    Parameters
+    ----------
+    system : System
+    record : list of str, optional
+        ``instance.variable`` patterns (fnmatch) of the outputs to record; default all outputs.
+    progress : callable, optional
+        ``progress(fraction, t)`` about 20 times in a run.
+    log : callable, optional
+        Receives every FMU log message as it arrives.
+    """
+
+    def __init__(self, system: System, record: list[str] | None = None,
+                 progress: Callable[[float, float], None] | None = None,
+                 log: Callable[[LogMessage], None] | None = None):
+        self.system = system
+        self.record = record
+        self.progress = progress
+        self.log = log
+        self.warnings: list[str] = []
+        self.order: list[str] = []
+        self.nodes: dict[str, _Node] = {}
+        self.blocks: dict[str, Block] = {}
+        self._checked = False
+
+    # -- checks ------------------------------------------------------------------------------------
+    def check(self) -> list[str]:
+        """Refuse a diagram that cannot run (DiagramError); return the warnings."""
+        from fmpy.validation import validate_fmu
+
+        s = self.system
+        problems: list[str] = []
+        self.nodes = {}
+        for spec in s.blocks:
+            path = s.fmu_path(spec)
+            if not path.is_file():
+                problems.append(f"block {spec.name!r}: FMU {path} does not exist (run `robofmu build`)")
+                continue
+            try:
+                found = validate_fmu(str(path))
+                md = read_model_description(str(path), validate=False)
+            except Exception as exc:
+                problems.append(f"block {spec.name!r}: {path} is not a valid FMU: {exc}")
+                continue
+            if found:
+                problems.append(f"block {spec.name!r}: {path} is not a valid FMU: " + "; ".join(map(str, found)))
+                continue
+            if md.coSimulation is None:
+                problems.append(f"block {spec.name!r}: {path} is not a co-simulation FMU")
+                continue
+            node = _Node(spec, path, md, {v.name: v for v in md.modelVariables})
+            inputs = {n for n, v in node.variables.items() if v.causality == "input"}
+            for u in md.outputs:
+                deps = u.dependencies
+                node.feedthrough[u.variable.name] = inputs if deps is None else {d.name for d in deps} & inputs
+            self.nodes[spec.name] = node
+
+        def names(node: _Node, base: str) -> list[str]:
+            if base in node.variables:
+                return [base]
+            found = sorted((int(n[len(base) + 1:-1]), n) for n in node.variables
+                           if n.startswith(base + "[") and n.endswith("]") and n[len(base) + 1:-1].isdigit())
+            return [n for _, n in found]
+
+        for spec in s.blocks:
+            node = self.nodes.get(spec.name)
+            if node is None:
+                continue
+            for pname in spec.parameters:
+                vs = names(node, pname)
+                if not vs:
+                    problems.append(f"block {spec.name!r}: unknown parameter {pname!r} in {node.path.name}")
+                elif any(node.variables[v].causality not in ("parameter", "input") for v in vs):
+                    problems.append(f"block {spec.name!r}: {pname!r} is a {node.variables[vs[0]].causality}, "
+                                    "not a parameter")
+
+        self.links: list[tuple[str, str, str, str]] = []   # src, out, dst, in (scalar names)
+        driven: dict[tuple[str, str], str] = {}
+        for wire in s.wires:
+            src, dst = self.nodes.get(wire.src), self.nodes.get(wire.dst)
+            for end, node in ((wire.src, src), (wire.dst, dst)):
+                if node is None and end not in [b.name for b in s.blocks]:
+                    problems.append(f"connection {wire}: no block {end!r}")
+            if src is None or dst is None:
+                continue
+            outs, ins = names(src, wire.src_var), names(dst, wire.dst_var)
+            if not outs:
+                problems.append(f"connection {wire}: {wire.src} has no variable {wire.src_var!r}")
+                continue
+            if not ins:
+                problems.append(f"connection {wire}: {wire.dst} has no variable {wire.dst_var!r}")
+                continue
+            if len(outs) != len(ins):
+                problems.append(f"connection {wire}: {len(outs)} source variables for {len(ins)} inputs")
+                continue
+            for o, i in zip(outs, ins):
+                vo, vi = src.variables[o], dst.variables[i]
+                where = f"connection {wire.src}.{o} -> {wire.dst}.{i}"
+                if vo.causality != "output":
+                    problems.append(f"{where}: {wire.src}.{o} is a {vo.causality}, not an output")
+                if vi.causality != "input":
+                    problems.append(f"{where}: {wire.dst}.{i} is a {vi.causality}, not an input")
+                if vo.type != vi.type:
+                    problems.append(f"{where}: type mismatch ({vo.type} -> {vi.type})")
+                uo, ui = _unit(vo), _unit(vi)
+                if uo and ui and uo != ui:
+                    problems.append(f"{where}: unit mismatch ({uo} -> {ui})")
+                key = (wire.dst, i)
+                if key in driven:
+                    problems.append(f"input {wire.dst}.{i} is driven twice: by {driven[key]} and {wire.src}.{o}")
+                driven[key] = f"{wire.src}.{o}"
+                self.links.append((wire.src, o, wire.dst, i))
+
+        if not problems:
+            problems += self._algebraic_loops()
+        if problems:
+            raise DiagramError(s.name, problems)
+
+        self.warnings = []
+        for name, node in self.nodes.items():
+            for v in node.md.modelVariables:
+                if v.causality == "input" and (name, v.name) not in driven:
+                    self.warnings.append(f"input {name}.{v.name} is not connected: it keeps its start value {v.start}")
+        self.order = self._evaluation_order()
+        self._checked = True
+        return self.warnings
+
+    def _algebraic_loops(self) -> list[str]:
+        """Cycles through direct feedthrough, on the variable graph: output -> wired input ->
+        the outputs of that block depending on it."""
+        succ: dict[tuple, list[tuple]] = {}
+        for src, o, dst, i in self.links:
+            for out, deps in self.nodes[dst].feedthrough.items():
+                if i in deps:
+                    succ.setdefault((src, o), []).append((dst, out))
+        problems, state, stack = [], {}, []
+
+        def visit(v):
+            state[v] = 1
+            stack.append(v)
+            for w in succ.get(v, []):
+                if state.get(w) == 1:
+                    cycle = stack[stack.index(w):] + [w]
+                    problems.append("algebraic loop through direct feedthrough: "
+                                    + " -> ".join(f"{b}.{n}" for b, n in cycle))
+                elif w not in state:
+                    visit(w)
+            stack.pop()
+            state[v] = 2
+
+        for v in list(succ):
+            if v not in state:
+                visit(v)
+        return problems[:1] if problems else []
+
+    def _evaluation_order(self) -> list[str]:
+        """Blocks in an order where every feedthrough input is produced before it is read."""
+        names = [b.name for b in self.system.blocks]
+        after: dict[str, set[str]] = {n: set() for n in names}
+        for src, o, dst, i in self.links:
+            if src != dst and any(i in deps for deps in self.nodes[dst].feedthrough.values()):
+                after[dst].add(src)
+        order, done = [], set()
+        while len(order) < len(names):
+            ready = [n for n in names if n not in done and after[n] <= done]
+            order.append(ready[0])
+            done.add(ready[0])
+        return order
+
+    # -- run ----------------------------------------------------------------------------------------
+    def run(self, stop_time: float | None = None, step: float | None = None,
+            algorithm: str | None = None, start_time: float = 0.0,
+            csv_path: str | Path | None = None) -> Result:
+        """Initialize every block and step the diagram from ``start_time`` to ``stop_time``.
+
+        On a failure, raises SimulationError naming the block, the time and the FMU's message;
+        its ``result`` holds every point recorded so far (also written to ``csv_path`` if given).
+        """
+        s = self.system
+        stop_time = s.stop_time if stop_time is None else float(stop_time)
+        h = s.step if step is None else float(step)
+        algorithm = s.algorithm if algorithm is None else algorithm
+        if algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(ALGORITHMS)}")
+        if not (h > 0 and math.isfinite(h)):
+            raise ValueError(f"communication step must be > 0 s, got {h}")
+        n_steps = int(round((stop_time - start_time) / h))
+        if n_steps < 1 or abs(start_time + n_steps * h - stop_time) > 1e-9 * max(1.0, abs(stop_time)):
+            raise ValueError(f"stop time {stop_time} s is not start time {start_time} s plus a whole "
+                             f"number of {h} s steps")
+        if not self._checked:
+            self.check()
+        try:
+            self._instantiate(start_time, stop_time)
+            return self._loop(start_time, h, n_steps, algorithm, csv_path)
+        finally:
+            self.close()
+
+    def _instantiate(self, t0: float, t_end: float) -> None:
+        self.blocks = {}
+        for name in self.order:
+            node = self.nodes[name]
+            try:
+                block = Block(node.path, name, echo=self.log)
+            except FMUError as exc:
+                raise SimulationError(str(exc), name, None, None) from None
+            self.blocks[name] = block
+            try:
+                block.initialize(t0, node.spec.parameters, stop_time=t_end)
+            except FMUError as exc:
+                raise SimulationError(f"{exc}", name, t0, None) from None
+
+    def _layout(self):
+        """Signal vectors, ports and recorded columns."""
+        real_out, bool_out = [], []
+        for name in self.order:
+            for v in self.nodes[name].md.modelVariables:
+                if v.causality == "output" and v.type == "Real":
+                    real_out.append((name, v.name, v.valueReference))
+                elif v.causality == "output" and v.type == "Boolean":
+                    bool_out.append((name, v.name, v.valueReference))
+        self.sig = np.zeros(len(real_out))
+        self.bsig = np.zeros(len(bool_out), dtype=np.int32)
+        ridx = {(b, n): k for k, (b, n, _) in enumerate(real_out)}
+        bidx = {(b, n): k for k, (b, n, _) in enumerate(bool_out)}
+        self.ports = {}
+        for name in self.order:
+            rows = [k for k, (b, _, _) in enumerate(real_out) if b == name]
+            brows = [k for k, (b, _, _) in enumerate(bool_out) if b == name]
+            get_r = _Port([real_out[k][2] for k in rows], self.sig[rows[0]:rows[-1] + 1] if rows else np.zeros(0),
+                          ctypes.c_double)
+            get_b = _Port([bool_out[k][2] for k in brows], self.bsig[brows[0]:brows[-1] + 1] if brows
+                          else np.zeros(0, dtype=np.int32), ctypes.c_int)
+            links = [lk for lk in self.links if lk[2] == name]
+            variables = self.nodes[name].variables
+            rl = [lk for lk in links if variables[lk[3]].type == "Real"]
+            bl = [lk for lk in links if variables[lk[3]].type == "Boolean"]
+            set_r = _Port([variables[i].valueReference for _, _, _, i in rl], np.zeros(len(rl)), ctypes.c_double)
+            set_b = _Port([variables[i].valueReference for _, _, _, i in bl], np.zeros(len(bl), dtype=np.int32),
+                          ctypes.c_int)
+            src_r = np.array([ridx[(s, o)] for s, o, _, _ in rl], dtype=np.intp)
+            src_b = np.array([bidx[(s, o)] for s, o, _, _ in bl], dtype=np.intp)
+            self.ports[name] = (get_r, get_b, set_r, set_b, src_r, src_b)
+        self.real_names = [f"{b}.{n}" for b, n, _ in real_out]
+        self.bool_names = [f"{b}.{n}" for b, n, _ in bool_out]
+        columns = self.real_names + self.bool_names
+        if self.record is None:
+            keep = list(range(len(columns)))
+        else:
+            keep = [k for k, c in enumerate(columns) if any(fnmatch.fnmatchcase(c, p) for p in self.record)]
+        self.columns = [columns[k] for k in keep]
+        self.keep = np.array(keep, dtype=np.intp)
+
+    def _loop(self, t0: float, h: float, n_steps: int, algorithm: str, csv_path) -> Result:
+        self._layout()
+        nr = len(self.sig)
+        row = np.zeros(nr + len(self.bsig))
+        rec = np.empty((n_steps + 1, len(self.keep)))
+        times = t0 + h * np.arange(n_steps + 1)
+        order = [(name, self.blocks[name].slave, self.ports[name]) for name in self.order]
+        every = max(1, n_steps // 20)
+        current, t, k, n_rec = None, t0, 0, 0
+        wall = _time.perf_counter()
+        sig, bsig = self.sig, self.bsig
+
+        def pull(slave, ports):
+            get_r, get_b = ports[0], ports[1]
+            if get_r.n:
+                slave.fmi2GetReal(slave.component, get_r.vr, get_r.n, get_r.c)
+            if get_b.n:
+                slave.fmi2GetBoolean(slave.component, get_b.vr, get_b.n, get_b.c)
+
+        last_b = {name: np.full(len(ports[5]), -1, dtype=np.int32) for name, _, ports in order}
+
+        def push(name, slave, ports):
+            set_r, set_b, src_r, src_b = ports[2], ports[3], ports[4], ports[5]
+            if set_r.n:
+                np.take(sig, src_r, out=set_r.buffer)
+                slave.fmi2SetReal(slave.component, set_r.vr, set_r.n, set_r.c)
+            if set_b.n:           # discrete inputs: set only when they change
+                np.take(bsig, src_b, out=set_b.buffer)
+                if not np.array_equal(set_b.buffer, last_b[name]):
+                    slave.fmi2SetBoolean(slave.component, set_b.vr, set_b.n, set_b.c)
+                    last_b[name][:] = set_b.buffer
+
+        try:
+            for k in range(n_steps + 1):
+                t = times[k]
+                if algorithm == "gauss-seidel" or k == 0:   # Jacobi, too, starts consistent
+                    for current, slave, ports in order:
+                        push(current, slave, ports)
+                        pull(slave, ports)
+                else:
+                    for current, slave, ports in order:
+                        pull(slave, ports)
+                    for current, slave, ports in order:
+                        push(current, slave, ports)
+                current = None
+                if not np.isfinite(sig).all():
+                    bad = self.real_names[int(np.flatnonzero(~np.isfinite(sig))[0])]
+                    block = bad.split(".")[0]
+                    raise _Failure(block, f"output {bad} is not finite ({sig[self.real_names.index(bad)]}) "
+                                          f"at t = {t:.9g} s")
+                row[:nr] = sig
+                row[nr:] = bsig
+                rec[k] = row[self.keep]
+                n_rec = k + 1
+                if k == n_steps:
+                    break
+                for current, slave, ports in order:
+                    slave.fmi2DoStep(slave.component, t, h, fmi2True)
+                current = None
+                if self.progress is not None and (k + 1) % every == 0:
+                    self.progress((k + 1) / n_steps, t + h)
+        except (FMICallException, _Failure) as exc:
+            name = exc.block if isinstance(exc, _Failure) else current
+            if isinstance(exc, _Failure):
+                message = f"{exc.block}: {exc.message}"
+            else:
+                logged = [m.message for m in self.blocks[name].messages if m.status in ("ERROR", "FATAL", "DISCARD")]
+                what = str(exc).split(" failed")[0]
+                message = (f"{name}: {what} failed at t = {t:.9g} s"
+                           + (": " + logged[-1] if logged else f" ({exc})"))
+            result = Result(times[:n_rec].copy(), list(self.columns), rec[:n_rec].copy(),
+                            {"failed": message, "algorithm": algorithm, "step": h})
+            if csv_path is not None:
+                result.to_csv(csv_path)
+            raise SimulationError(message + (f"\nresults up to t = {times[n_rec - 1]:.9g} s kept"
+                                             + (f" in {csv_path}" if csv_path else "") if n_rec else ""),
+                                  name, float(t), result) from None
+        result = Result(times, list(self.columns), rec,
+                        {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall,
+                         "order": list(self.order)})
+        if csv_path is not None:
+            result.to_csv(csv_path)
+        return result
+
+    def close(self) -> None:
+        for b in self.blocks.values():
+            b.close()
+        self.blocks = {}
+
+
+class _Failure(Exception):
+    def __init__(self, block: str, message: str):
+        super().__init__(message)
+        self.block = block
+        self.message = message
+
+
+def _unit(v) -> str | None:
+    if v.unit:
+        return v.unit
+    if v.declaredType is not None and getattr(v.declaredType, "unit", None):
+        return v.declaredType.unit
+    return None

@@ -214,9 +214,23 @@ class BlockSlave(Fmi2Slave):
         return self._other(String, "String", name, "parameter", description, str(start), "fixed")
 
     # -- FMI value access -----------------------------------------------------------------------
+    def _refresh(self) -> None:
+        """Bring outputs up to date: from the inputs (feedthrough blocks) or, during
+        initialization mode, from the parameters and inputs set so far (FMI 2.0 lets an
+        importer read calculated outputs before fmi2ExitInitializationMode)."""
+        if self._initialized:
+            if self.feedthrough:
+                self._evaluate_safely()
+            return
+        try:
+            self.initialize()
+        except Exception:
+            pass        # invalid parameters are reported by fmi2ExitInitializationMode
+        self._dirty = False
+
     def get_real(self, vrs):
-        if self._dirty and self.feedthrough and self._initialized:
-            self._evaluate_safely()
+        if self._dirty:
+            self._refresh()
         if not self._real[vrs].all():
             self._raise_to_importer(f"fmi2GetReal: value references {list(vrs)} are not all Reals")
         return self.r[vrs].tolist()
@@ -229,8 +243,8 @@ class BlockSlave(Fmi2Slave):
         self._dirty = True
 
     def get_boolean(self, vrs):
-        if self._dirty and self.feedthrough and self._initialized:
-            self._evaluate_safely()
+        if self._dirty:
+            self._refresh()
         return super().get_boolean(vrs)
 
     # -- helpers for subclasses -----------------------------------------------------------------

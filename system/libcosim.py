@@ -1,0 +1,292 @@
+"""Run robofmu FMUs through libcosim (the OSP co-simulation library) via libcosimpy.
+
+A thin layer over libcosimpy 0.0.6 that speaks variable *names* (``q[2]``) and vector bases
+(``q`` -> ``q[1]``..``q[n]``) instead of value references, and raises instead of returning
+False. libcosimpy is an optional (dev) dependency: it is imported only when a
+:class:`CosimRun` is created.
+
+In-process use: libcosimpy calls libcosimc through ``ctypes.CDLL``, which releases the GIL
+for the duration of every call. libcosim then drives the FMUs from its own worker threads, and
+the pythonfmu FMUs (which import nothing of libpython themselves but resolve its symbols from
+the host process) find the running interpreter (``Py_IsInitialized``) and take the GIL with
+``PyGILState_Ensure``. So the FMUs run on *this* interpreter, and no subprocess nor
+``LD_PRELOAD`` of libpython is needed when the host is a dynamically linked CPython. (A host
+that is not Python, e.g. the ``cosim`` command-line tool, would need libpython preloaded.)
+
+Beware: a FMU that fails fmi2ExitInitializationMode (e.g. an invalid parameter) makes libcosim
+throw from a worker thread, and the process dies of std::terminate (SIGABRT) instead of
+:meth:`CosimRun.step` raising; run such cases in a child process. A refused fmi2DoStep and a
+failed fmi2Instantiate are reported as :class:`CosimError`. libcosim's log (FMU messages
+included) is written to the C++ stdout.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+_INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
+NANO = 1_000_000_000
+
+
+def to_ns(t: float) -> int:
+    """Seconds to libcosim's integer nanoseconds (rounded, not truncated: 1e-3 s -> 1000000)."""
+    return int(round(float(t) * NANO))
+
+
+class CosimError(RuntimeError):
+    """A libcosim call failed; the message carries libcosim's last error message."""
+
+
+@dataclass(frozen=True)
+class CosimVariable:
+    name: str
+    reference: int
+    type: str          # "REAL", "INTEGER", "STRING", "BOOLEAN"
+    causality: str     # "INPUT", "PARAMETER", "OUTPUT", ...
+
+
+@dataclass
+class _Slave:
+    index: int
+    path: Path
+    variables: dict[str, CosimVariable]
+    local_slave: object   # the CosimLocalSlave, kept alive with the run
+
+
+class CosimRun:
+    """One libcosim execution with a fixed step, a last-value observer and an override manipulator.
+
+    Parameters
+    ----------
+    step_size : float
+        Communication step (s) of libcosim's fixed-step algorithm.
+    log_level : str, optional
+        libcosim console log level ("TRACE", "DEBUG", "INFO", "WARNING", "ERROR", "FATAL");
+        process-wide (libcosim's own default, DEBUG, prints every FMI Library call). None: leave
+        it as it is.
+    """
+
+    def __init__(self, step_size: float = 1e-3, log_level: str | None = "WARNING"):
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+        from libcosimpy.CosimManipulator import CosimManipulator
+        from libcosimpy.CosimObserver import CosimObserver
+
+        if log_level is not None:
+            log_output_level(CosimLogLevel[log_level.upper()])
+        if not step_size > 0:
+            raise ValueError(f"step_size must be > 0 s, got {step_size}")
+        self.step_size = float(step_size)
+        self.execution = CosimExecution.from_step_size(to_ns(step_size))
+        self.observer = CosimObserver.create_last_value()
+        self._check(self.execution.add_observer(self.observer), "add last-value observer")
+        self.manipulator = CosimManipulator.create_override()
+        self._check(self.execution.add_manipulator(self.manipulator), "add override manipulator")
+        self.slaves: dict[str, _Slave] = {}
+        self.time_series = None
+
+    # -- errors ---------------------------------------------------------------------------------
+    @staticmethod
+    def last_error() -> str:
+        from libcosimpy._internal import get_last_error_message
+
+        try:
+            return get_last_error_message()
+        except Exception:  # pragma: no cover - message not decodable
+            return "(no message)"
+
+    def _check(self, ok: bool, what: str) -> None:
+        if not ok:
+            raise CosimError(f"libcosim: {what} failed: {self.last_error()}")
+
+    # -- slaves and names -----------------------------------------------------------------------
+    def add(self, path: str | Path, name: str) -> int:
+        """Add FMU ``path`` as local slave ``name``; returns its slave index."""
+        from libcosimpy.CosimSlave import CosimLocalSlave
+
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{name}: FMU {path} does not exist")
+        if name in self.slaves:
+            raise ValueError(f"instance name {name!r} already used")
+        local = CosimLocalSlave(fmu_path=str(path.resolve()), instance_name=name)
+        if not local.ptr():
+            raise CosimError(f"libcosim: loading {path} failed: {self.last_error()}")
+        index = self.execution.add_local_slave(local)
+        if index < 0:
+            raise CosimError(f"libcosim: adding {name} ({path}) failed: {self.last_error()}")
+        variables = {}
+        for v in self.execution.slave_variables(index):
+            var = CosimVariable(v.name.decode(), int(v.reference), _enum_name("CosimVariableType", v.type),
+                                _enum_name("CosimVariableCausality", v.causality))
+            variables[var.name] = var
+        self.slaves[name] = _Slave(index, path, variables, local)
+        return index
+
+    def index(self, instance: str) -> int:
+        return self._slave(instance).index
+
+    def _slave(self, instance: str) -> _Slave:
+        try:
+            return self.slaves[instance]
+        except KeyError:
+            raise KeyError(f"no instance {instance!r}; have {sorted(self.slaves)}") from None
+
+    def names(self, instance: str, base: str) -> list[str]:
+        """``base`` itself if it is a variable of ``instance``, else ``base[1]``, ``base[2]``, ..."""
+        variables = self._slave(instance).variables
+        if base in variables:
+            return [base]
+        found = sorted((int(m.group(2)), n) for n in variables
+                       if (m := _INDEXED.match(n)) and m.group(1) == base)
+        if not found:
+            raise KeyError(f"{instance}: no variable {base!r} (nor {base}[i])")
+        return [n for _, n in found]
+
+    def variables(self, instance: str, base: str) -> list[CosimVariable]:
+        slave = self._slave(instance)
+        return [slave.variables[n] for n in self.names(instance, base)]
+
+    def vrs(self, instance: str, base: str) -> list[int]:
+        return [v.reference for v in self.variables(instance, base)]
+
+    # -- values ---------------------------------------------------------------------------------
+    @staticmethod
+    def _spread(variables, value) -> list:
+        values = list(value) if isinstance(value, (list, tuple)) or hasattr(value, "__array__") else [value]
+        if len(values) != len(variables):
+            raise ValueError(f"{variables[0].name}: {len(variables)} elements, got {len(values)} values")
+        return values
+
+    def set_initial(self, instance: str, name: str, value) -> None:
+        """Initial (start) value of a parameter or input, or of every element of a vector base.
+
+        Applied by libcosim in initialization mode, before fmi2ExitInitializationMode, so it
+        must be called before the first step."""
+        index = self.index(instance)
+        variables = self.variables(instance, name)
+        ex = self.execution
+        setters = {"REAL": (ex.real_initial_value, float), "INTEGER": (ex.integer_initial_value, int),
+                   "BOOLEAN": (ex.boolean_initial_value, bool), "STRING": (ex.string_initial_value, str)}
+        for var, v in zip(variables, self._spread(variables, value)):
+            setter, cast = setters[var.type]
+            self._check(setter(index, var.reference, cast(v)), f"initial value {instance}.{var.name} = {v!r}")
+
+    def override(self, instance: str, name: str, value) -> None:
+        """Override a Real variable (or vector) from now on, through the override manipulator:
+        libcosim sets it on the FMU before every following step. Not applied during
+        initialization: an override made before the first step shows from t = one step on (use
+        :meth:`set_initial` for t = 0)."""
+        variables = self.variables(instance, name)
+        bad = [v.name for v in variables if v.type != "REAL"]
+        if bad:
+            raise TypeError(f"{instance}: override supports Real variables only, not {bad}")
+        values = [float(v) for v in self._spread(variables, value)]
+        self._check(self.manipulator.slave_real_values(self.index(instance), [v.reference for v in variables],
+                                                       values),
+                    f"override {instance}.{name}")
+
+    def connect(self, source: str, output: str, target: str, input_: str) -> None:
+        """Connect ``source.output`` to ``target.input_`` (vector bases element by element)."""
+        outs, ins = self.variables(source, output), self.variables(target, input_)
+        if len(outs) != len(ins):
+            raise ValueError(f"{source}.{output} has {len(outs)} elements, {target}.{input_} {len(ins)}")
+        ex = self.execution
+        connectors = {"REAL": ex.connect_real_variables, "INTEGER": ex.connect_integer_variables,
+                      "BOOLEAN": ex.connect_boolean_variables, "STRING": ex.connect_string_variables}
+        for o, i in zip(outs, ins):
+            if o.type != i.type:
+                raise TypeError(f"{source}.{o.name} ({o.type}) -> {target}.{i.name} ({i.type})")
+            status = connectors[o.type](self.index(source), o.reference, self.index(target), i.reference)
+            # libcosimpy returns libcosimc's raw status here (0: success, -1: failure), not a bool
+            self._check(status == 0, f"connect {source}.{o.name} -> {target}.{i.name}")
+
+    def get(self, instance: str, name: str):
+        """Last observed value of a variable (or list for a vector base), from the last-value
+        observer (values after the latest step)."""
+        index = self.index(instance)
+        variables = self.variables(instance, name)
+        getters = {"REAL": self.observer.last_real_values, "INTEGER": self.observer.last_integer_values,
+                   "BOOLEAN": self.observer.last_boolean_values, "STRING": self.observer.last_string_values}
+        out = []
+        for var in variables:
+            (value,) = getters[var.type](index, [var.reference])
+            out.append(value.decode() if isinstance(value, bytes) else value)
+        return out[0] if name in self._slave(instance).variables else out
+
+    def observe_series(self, instance: str, name: str, buffer_size: int = 100_000) -> None:
+        """Record every step's value of Real variable(s) with a (buffered) time-series observer."""
+        from libcosimpy.CosimEnums import CosimVariableType
+        from libcosimpy.CosimObserver import CosimObserver
+
+        if self.time_series is None:
+            self.time_series = CosimObserver.create_time_series(buffer_size)
+            self._check(self.execution.add_observer(self.time_series), "add time-series observer")
+        for var in self.variables(instance, name):
+            if var.type != "REAL":
+                raise TypeError(f"{instance}.{var.name}: only Real variables are recorded")
+            self._check(self.time_series.start_time_series(self.index(instance), var.reference,
+                                                           CosimVariableType.REAL),
+                        f"observe {instance}.{var.name}")
+
+    def series(self, instance: str, name: str, from_step: int = 0, count: int = 100_000):
+        """(times in s, step numbers, values) recorded for one Real variable since ``from_step``.
+
+        Calls libcosimc directly: libcosimpy 0.0.6's ``time_series_real_samples`` trims its
+        result by counting the step numbers equal to 0, so when the samples start at step 0
+        (the values right after initialization) it drops the last sample."""
+        from ctypes import POINTER, c_double, c_int, c_int64, c_size_t, c_uint32
+
+        from libcosimpy.CosimObserver import CosimObserver
+        from libcosimpy._internal import libcosimc, wrap_function
+
+        if self.time_series is None:
+            raise RuntimeError("no variable is observed; call observe_series() first")
+        (var,) = self.variables(instance, name)
+        values, steps, times = (c_double * count)(), (c_int64 * count)(), (c_int64 * count)()
+        get = wrap_function(lib=libcosimc(), funcname="cosim_observer_slave_get_real_samples",
+                            argtypes=[POINTER(CosimObserver), c_int, c_uint32, c_int64, c_size_t,
+                                      c_double * count, c_int64 * count, c_int64 * count],
+                            restype=c_int64)
+        n = get(self.time_series.ptr(), self.index(instance), var.reference, from_step, count,
+                values, steps, times)
+        self._check(n >= 0, f"time series of {instance}.{var.name}")
+        return [t / NANO for t in times[:n]], list(steps[:n]), list(values[:n])
+
+    # -- time -----------------------------------------------------------------------------------
+    def step(self, count: int = 1) -> None:
+        """Advance ``count`` communication steps (the first call also initializes the FMUs)."""
+        t = self.time
+        self._check(self.execution.step(count), f"{count} step(s) from t = {t:.9g} s")
+
+    def simulate_until(self, t: float) -> None:
+        self._check(self.execution.simulate_until(to_ns(t)), f"simulate until {t:.9g} s")
+
+    @property
+    def time(self) -> float:
+        return self.execution.status().current_time / NANO
+
+    def status(self):
+        return self.execution.status()
+
+    # -- life cycle -----------------------------------------------------------------------------
+    def close(self) -> None:
+        """Destroy the execution (which frees every FMU instance) now, rather than whenever the
+        garbage collector gets to it (possibly at interpreter shutdown). Safe to call twice."""
+        for attr in ("execution", "observer", "manipulator", "time_series"):
+            if hasattr(self, attr):
+                setattr(self, attr, None)
+        self.slaves.clear()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _enum_name(enum: str, value: int) -> str:
+    from libcosimpy import CosimEnums
+
+    return getattr(CosimEnums, enum)(value).name

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 
 def _build(args) -> int:
@@ -26,6 +27,31 @@ def _build(args) -> int:
     return status
 
 
+def _run(args) -> int:
+    from robofmu.system.master import DiagramError, SimulationError
+    from robofmu.system.runner import run_experiment
+
+    out = Path(args.out or Path("results") / args.experiment)
+    try:
+        run = run_experiment(args.experiment, out, fmu_dir=args.fmus, step=args.step,
+                             stop_time=args.stop, algorithm=args.algorithm)
+    except (ValueError, DiagramError) as exc:
+        print(f"robofmu run: {exc}", file=sys.stderr)
+        return 2
+    except SimulationError as exc:
+        print(f"robofmu run: {exc}", file=sys.stderr)
+        return 1
+    print(run.section)
+    print(f"\nwrote {out / 'results.csv'}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
+    return 0
+
+
+def _demo(args) -> int:
+    from robofmu.system.demo import demo
+
+    return demo(Path(args.out), fmu_dir=args.fmus, quick=args.quick)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="robofmu",
@@ -39,6 +65,28 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("robots", nargs="*", metavar="ROBOT", help="robots to build (default: all described)")
     p.add_argument("--out", default="fmus", metavar="DIR", help="output folder (default: fmus)")
     p.set_defaults(func=_build)
+
+    from robofmu.system.experiment import available as experiments
+    p = sub.add_parser("run", help="run a named co-simulation experiment",
+                       description="Run a co-simulation experiment and write DIR/results.csv (time, then "
+                                   "one column per signal 'instance.variable'), figures and report.md. "
+                                   f"Experiments: {', '.join(experiments())}.")
+    p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: results/EXPERIMENT)")
+    p.add_argument("--step", type=float, metavar="H", help="communication step in s (default: the experiment's)")
+    p.add_argument("--stop", type=float, metavar="T", help="stop time in s (default: the experiment's)")
+    p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"], help="master algorithm")
+    p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
+    p.set_defaults(func=_run)
+
+    p = sub.add_parser("demo", help="the flagship study: every chess experiment, figures and a report",
+                       description="Run chess-pd, chess-pid (pawn known and unknown to the model), the "
+                                   "accuracy study against a monolithic reference and the step responses; "
+                                   "write figures and DIR/report.md.")
+    p.add_argument("--out", default="results", metavar="DIR", help="output folder (default: results)")
+    p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
+    p.add_argument("--quick", action="store_true", help="shorter accuracy study")
+    p.set_defaults(func=_demo)
 
     args = parser.parse_args(argv)
     return args.func(args)

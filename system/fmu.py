@@ -7,6 +7,7 @@ FMU's last error messages when a call fails.
 """
 from __future__ import annotations
 
+import ctypes
 import re
 import shutil
 from dataclasses import dataclass
@@ -52,6 +53,40 @@ class FMUError(RuntimeError):
 
 _INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
 
+# fmpy's native logger proxy (it formats the variadic message) remembers one Python logger for
+# the whole process, whichever instance registered last. So every Block registers the same
+# logger, and each instance's callbacks carry its own componentEnvironment, which the FMU hands
+# back with every message: the route to the Block the message belongs to.
+_ROUTES: dict[int, "Block"] = {}
+_NEXT_ROUTE = [1]
+
+
+def _route_message(env, instance, status, category, message):
+    block = _ROUTES.get(env or 0)
+    if block is not None:
+        block._log(env, instance, status, category, message)
+
+
+_LOGGER = fmi2CallbackLoggerTYPE(_route_message)
+
+
+def _callbacks_for(block: "Block") -> fmi2CallbackFunctions:
+    key = _NEXT_ROUTE[0]
+    _NEXT_ROUTE[0] += 1
+    _ROUTES[key] = block
+    block._route = key
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = _LOGGER
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    callbacks.componentEnvironment = key
+    try:
+        from fmpy.logging import addLoggerProxy
+        addLoggerProxy(ctypes.byref(callbacks))
+    except Exception:  # pragma: no cover - fmpy without its logging proxy
+        pass
+    return callbacks
+
 
 class Block:
     """An instantiated co-simulation FMU.
@@ -79,16 +114,7 @@ class Block:
         self.messages: list[LogMessage] = []
         self._echo = echo
         self._unzipdir = extract(str(self.path))
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:
-            from fmpy.logging import addLoggerProxy
-            from ctypes import byref
-            addLoggerProxy(byref(self._callbacks))
-        except Exception:  # pragma: no cover - fmpy without its logging proxy
-            pass
+        self._callbacks = _callbacks_for(self)
         self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
                                modelIdentifier=self.md.coSimulation.modelIdentifier,
                                instanceName=name)
@@ -217,6 +243,7 @@ class Block:
         except Exception:
             pass
         shutil.rmtree(self._unzipdir, ignore_errors=True)
+        _ROUTES.pop(self._route, None)
 
     def __enter__(self):
         return self

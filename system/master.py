@@ -224,8 +224,7 @@ class Master:
                 driven[key] = f"{wire.src}.{o}"
                 self.links.append((wire.src, o, wire.dst, i))
 
-        if not problems:
-            problems += self._algebraic_loops()
+        problems += self._algebraic_loops()
         if problems:
             raise DiagramError(s.name, problems)
 

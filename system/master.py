@@ -369,44 +369,52 @@ class Master:
         row = np.zeros(nr + len(self.bsig))
         rec = np.empty((n_steps + 1, len(self.keep)))
         times = t0 + h * np.arange(n_steps + 1)
-        order = [(name, self.blocks[name].slave, self.ports[name]) for name in self.order]
+        order = [(name, _Raw(self.blocks[name].slave), self.ports[name]) for name in self.order]
         every = max(1, n_steps // 20)
         current, t, k, n_rec = None, t0, 0, 0
         wall = _time.perf_counter()
         sig, bsig = self.sig, self.bsig
 
-        def pull(slave, ports):
+        def pull(name, fn, ports):
             get_r, get_b = ports[0], ports[1]
             if get_r.n:
-                slave.fmi2GetReal(slave.component, get_r.vr, get_r.n, get_r.c)
+                status = fn.get_real(fn.c, get_r.vr, get_r.n, get_r.c)
+                if status > 1:
+                    raise FMICallException("fmi2GetReal", status)
             if get_b.n:
-                slave.fmi2GetBoolean(slave.component, get_b.vr, get_b.n, get_b.c)
+                status = fn.get_bool(fn.c, get_b.vr, get_b.n, get_b.c)
+                if status > 1:
+                    raise FMICallException("fmi2GetBoolean", status)
 
         last_b = {name: np.full(len(ports[5]), -1, dtype=np.int32) for name, _, ports in order}
 
-        def push(name, slave, ports):
+        def push(name, fn, ports):
             set_r, set_b, src_r, src_b = ports[2], ports[3], ports[4], ports[5]
             if set_r.n:
                 np.take(sig, src_r, out=set_r.buffer)
-                slave.fmi2SetReal(slave.component, set_r.vr, set_r.n, set_r.c)
+                status = fn.set_real(fn.c, set_r.vr, set_r.n, set_r.c)
+                if status > 1:
+                    raise FMICallException("fmi2SetReal", status)
             if set_b.n:           # discrete inputs: set only when they change
                 np.take(bsig, src_b, out=set_b.buffer)
                 if not np.array_equal(set_b.buffer, last_b[name]):
-                    slave.fmi2SetBoolean(slave.component, set_b.vr, set_b.n, set_b.c)
+                    status = fn.set_bool(fn.c, set_b.vr, set_b.n, set_b.c)
+                    if status > 1:
+                        raise FMICallException("fmi2SetBoolean", status)
                     last_b[name][:] = set_b.buffer
 
         try:
             for k in range(n_steps + 1):
                 t = times[k]
                 if algorithm == "gauss-seidel" or k == 0:   # Jacobi, too, starts consistent
-                    for current, slave, ports in order:
-                        push(current, slave, ports)
-                        pull(slave, ports)
+                    for current, fn, ports in order:
+                        push(current, fn, ports)
+                        pull(current, fn, ports)
                 else:
-                    for current, slave, ports in order:
-                        pull(slave, ports)
-                    for current, slave, ports in order:
-                        push(current, slave, ports)
+                    for current, fn, ports in order:
+                        pull(current, fn, ports)
+                    for current, fn, ports in order:
+                        push(current, fn, ports)
                 current = None
                 if not np.isfinite(sig).all():
                     bad = self.real_names[int(np.flatnonzero(~np.isfinite(sig))[0])]
@@ -419,8 +427,10 @@ class Master:
                 n_rec = k + 1
                 if k == n_steps:
                     break
-                for current, slave, ports in order:
-                    slave.fmi2DoStep(slave.component, t, h, fmi2True)
+                for current, fn, ports in order:
+                    status = fn.do_step(fn.c, t, h, fmi2True)
+                    if status > 1:
+                        raise FMICallException("fmi2DoStep", status)
                 current = None
                 if self.progress is not None and (k + 1) % every == 0:
                     self.progress((k + 1) / n_steps, t + h)
@@ -451,6 +461,18 @@ class Master:
         for b in self.blocks.values():
             b.close()
         self.blocks = {}
+
+
+class _Raw:
+    """A block's FMI functions as fmpy loaded them (prototypes set), called without fmpy's
+    per-call Python wrapper: the master checks the returned status itself."""
+
+    def __init__(self, slave):
+        f = slave._functions
+        self.c = slave.component
+        self.get_real, self.set_real = f["fmi2GetReal"], f["fmi2SetReal"]
+        self.get_bool, self.set_bool = f["fmi2GetBoolean"], f["fmi2SetBoolean"]
+        self.do_step = f["fmi2DoStep"]
 
 
 class _Failure(Exception):

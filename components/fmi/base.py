@@ -122,6 +122,8 @@ class BlockSlave(Fmi2Slave):
         self._settable_real = (kinds == "Real") & ((caus == "input") | (caus == "parameter"))
         self._real = kinds == "Real"
         self._input_vrs = np.flatnonzero((kinds == "Real") & (caus == "input"))
+        self._input_mask = ((kinds == "Real") & (caus == "input")).astype(float)
+        self._indices: dict[tuple, np.ndarray] = {}
         self._names = [None] * n
         for v in self.meta.values():
             self._names[v.vr] = v.name
@@ -228,18 +230,29 @@ class BlockSlave(Fmi2Slave):
             pass        # invalid parameters are reported by fmi2ExitInitializationMode
         self._dirty = False
 
+    def _index(self, vrs, allowed: np.ndarray, call: str) -> np.ndarray:
+        """Value references as an index array, checked once per distinct list (importers batch
+        the same references at every step)."""
+        key = (call, *vrs)
+        index = self._indices.get(key)
+        if index is None:
+            index = np.asarray(vrs, dtype=np.intp)
+            if index.size and (index.min() < 0 or index.max() >= len(self.r) or not allowed[index].all()):
+                bad = [self._names[v] if 0 <= v < len(self.r) else v for v in vrs
+                       if not (0 <= v < len(self.r)) or not allowed[v]]
+                self._raise_to_importer(f"{call}: value references of {bad} do not name "
+                                        + ("Real variables" if call == "fmi2GetReal" else
+                                           "Real inputs or parameters"))
+            self._indices[key] = index
+        return index
+
     def get_real(self, vrs):
         if self._dirty:
             self._refresh()
-        if not self._real[vrs].all():
-            self._raise_to_importer(f"fmi2GetReal: value references {list(vrs)} are not all Reals")
-        return self.r[vrs].tolist()
+        return self.r[self._index(vrs, self._real, "fmi2GetReal")].tolist()
 
     def set_real(self, vrs, values):
-        if not self._settable_real[vrs].all():
-            bad = [self._names[v] for v in vrs if not self._settable_real[v]]
-            self._raise_to_importer(f"fmi2SetReal: cannot set {bad}: not a Real input or parameter")
-        self.r[vrs] = values
+        self.r[self._index(vrs, self._settable_real, "fmi2SetReal")] = values
         self._dirty = True
 
     def get_boolean(self, vrs):
@@ -258,6 +271,8 @@ class BlockSlave(Fmi2Slave):
 
     def nonfinite_input(self) -> str | None:
         """'name = value' of the first non-finite Real input, or None."""
+        if math.isfinite(self.r.dot(self._input_mask)):    # fast path: nan and inf propagate
+            return None
         values = self.r[self._input_vrs]
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size == 0:

@@ -2,8 +2,10 @@
 
 At every communication point t the master evaluates the diagram in dependency order
 (Gauss-Seidel: a direct-feedthrough block reads inputs its upstream blocks produced at t, so
-trajectory -> ik -> controller -> plant has no step of delay), records every output, then calls
-doStep(t, h) on each block. The Jacobi option reads all outputs first and then sets all inputs,
+trajectory -> ik -> controller -> plant has no step of delay); inputs that come from blocks
+evaluated later (the plant's torque: the plant has no feedthrough, so it is evaluated before the
+controller) are set once the pass is over. It records every output, then calls doStep(t, h) on
+each block, so the plant integrates [t, t + h] with the torque computed at t. The Jacobi option reads all outputs first and then sets all inputs,
 so each feedthrough block lags one step (for comparison).
 
 Values move between FMUs through preallocated buffers: one batched fmi2GetReal per block into a
@@ -343,16 +345,14 @@ class Master:
                           ctypes.c_double)
             get_b = _Port([bool_out[k][2] for k in brows], self.bsig[brows[0]:brows[-1] + 1] if brows
                           else np.zeros(0, dtype=np.int32), ctypes.c_int)
+            # Inputs from blocks evaluated earlier are set before this block's outputs are read;
+            # inputs from blocks evaluated later cannot affect those outputs (the order is
+            # topological in the feedthrough graph) and are set after the pass, before doStep.
+            rank = {n: k for k, n in enumerate(self.order)}
             links = [lk for lk in self.links if lk[2] == name]
-            variables = self.nodes[name].variables
-            rl = [lk for lk in links if variables[lk[3]].type == "Real"]
-            bl = [lk for lk in links if variables[lk[3]].type == "Boolean"]
-            set_r = _Port([variables[i].valueReference for _, _, _, i in rl], np.zeros(len(rl)), ctypes.c_double)
-            set_b = _Port([variables[i].valueReference for _, _, _, i in bl], np.zeros(len(bl), dtype=np.int32),
-                          ctypes.c_int)
-            src_r = np.array([ridx[(s, o)] for s, o, _, _ in rl], dtype=np.intp)
-            src_b = np.array([bidx[(s, o)] for s, o, _, _ in bl], dtype=np.intp)
-            self.ports[name] = (get_r, get_b, set_r, set_b, src_r, src_b)
+            early = _Inputs([lk for lk in links if rank[lk[0]] < rank[name]], self.nodes[name].variables, ridx, bidx)
+            late = _Inputs([lk for lk in links if rank[lk[0]] >= rank[name]], self.nodes[name].variables, ridx, bidx)
+            self.ports[name] = (get_r, get_b, early, late)
         self.real_names = [f"{b}.{n}" for b, n, _ in real_out]
         self.bool_names = [f"{b}.{n}" for b, n, _ in bool_out]
         columns = self.real_names + self.bool_names
@@ -386,35 +386,36 @@ class Master:
                 if status > 1:
                     raise FMICallException("fmi2GetBoolean", status)
 
-        last_b = {name: np.full(len(ports[5]), -1, dtype=np.int32) for name, _, ports in order}
-
-        def push(name, fn, ports):
-            set_r, set_b, src_r, src_b = ports[2], ports[3], ports[4], ports[5]
+        def push(fn, inputs: "_Inputs"):
+            set_r, set_b = inputs.real, inputs.boolean
             if set_r.n:
-                np.take(sig, src_r, out=set_r.buffer)
+                np.take(sig, inputs.src_r, out=set_r.buffer)
                 status = fn.set_real(fn.c, set_r.vr, set_r.n, set_r.c)
                 if status > 1:
                     raise FMICallException("fmi2SetReal", status)
             if set_b.n:           # discrete inputs: set only when they change
-                np.take(bsig, src_b, out=set_b.buffer)
-                if not np.array_equal(set_b.buffer, last_b[name]):
+                np.take(bsig, inputs.src_b, out=set_b.buffer)
+                if not np.array_equal(set_b.buffer, inputs.last_b):
                     status = fn.set_bool(fn.c, set_b.vr, set_b.n, set_b.c)
                     if status > 1:
                         raise FMICallException("fmi2SetBoolean", status)
-                    last_b[name][:] = set_b.buffer
+                    inputs.last_b[:] = set_b.buffer
 
         try:
             for k in range(n_steps + 1):
                 t = times[k]
                 if algorithm == "gauss-seidel" or k == 0:   # Jacobi, too, starts consistent
                     for current, fn, ports in order:
-                        push(current, fn, ports)
+                        push(fn, ports[2])
                         pull(current, fn, ports)
+                    for current, fn, ports in order:
+                        push(fn, ports[3])
                 else:
                     for current, fn, ports in order:
                         pull(current, fn, ports)
                     for current, fn, ports in order:
-                        push(current, fn, ports)
+                        push(fn, ports[2])
+                        push(fn, ports[3])
                 current = None
                 if not np.isfinite(sig).all():
                     bad = self.real_names[int(np.flatnonzero(~np.isfinite(sig))[0])]
@@ -461,6 +462,20 @@ class Master:
         for b in self.blocks.values():
             b.close()
         self.blocks = {}
+
+
+class _Inputs:
+    """The wired inputs of one block fed in one phase: value references, buffers, sources."""
+
+    def __init__(self, links, variables, ridx, bidx):
+        rl = [lk for lk in links if variables[lk[3]].type == "Real"]
+        bl = [lk for lk in links if variables[lk[3]].type == "Boolean"]
+        self.real = _Port([variables[i].valueReference for _, _, _, i in rl], np.zeros(len(rl)), ctypes.c_double)
+        self.boolean = _Port([variables[i].valueReference for _, _, _, i in bl],
+                             np.zeros(len(bl), dtype=np.int32), ctypes.c_int)
+        self.src_r = np.array([ridx[(s, o)] for s, o, _, _ in rl], dtype=np.intp)
+        self.src_b = np.array([bidx[(s, o)] for s, o, _, _ in bl], dtype=np.intp)
+        self.last_b = np.full(len(bl), -1, dtype=np.int32)
 
 
 class _Raw:

@@ -79,6 +79,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.set_defaults(func=_run)
 
+    from robofmu.system.stepresponse import add_step_command
+    add_step_command(sub)
+
     p = sub.add_parser("demo", help="the flagship study: every chess experiment, figures and a report",
                        description="Run chess-pd, chess-pid (pawn known and unknown to the model), the "
                                    "accuracy study against a monolithic reference and the step responses; "

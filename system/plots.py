@@ -32,36 +32,34 @@ def _grip_spans(ax, result: Result):
             ax.axvspan(t[0], t[-1], color="0.9", zorder=0, label="pawn carried")
 
 
-def cartesian_reference(result: Result, path: Path) -> Path:
-    """Seed Fig. 2: TCP reference position, velocity and acceleration."""
+def _profile(result: Result, path: Path, bases: list[str], units: list[str], labels: list[str],
+             title: str) -> Path:
+    """Position, velocity and acceleration of a vector signal, one panel each."""
     fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
-    for ax, base, unit, title in zip(axes, ("x_ref", "xd_ref", "xdd_ref"), ("m", "m/s", "m/s²"),
-                                     ("position", "velocity", "acceleration")):
-        v = result.vector(f"trajectory.{base}")
-        for i, label in enumerate("xyz"):
-            ax.plot(result.time, v[:, i], color=COLORS[i], label=label)
-        ax.set_ylabel(f"{title} ({unit})")
+    for ax, base, unit, kind in zip(axes, bases, units, ("position", "velocity", "acceleration")):
+        v = result.vector(base)
+        for i, label in enumerate(labels):
+            ax.plot(result.time, v[:, i], color=COLORS[i % 4], label=label)
+        ax.set_ylabel(f"{kind} ({unit})")
         ax.grid(alpha=0.3)
-    axes[0].legend(ncol=3, loc="upper right")
-    axes[0].set_title("TCP reference: LSPB moves through the waypoints (queen's gambit)")
+    axes[0].legend(ncol=len(labels), loc="upper right")
+    axes[0].set_title(title)
     axes[-1].set_xlabel("time (s)")
     return _save(fig, path)
+
+
+def cartesian_reference(result: Result, path: Path) -> Path:
+    """Seed Fig. 2: TCP reference position, velocity and acceleration."""
+    return _profile(result, path, ["trajectory.x_ref", "trajectory.xd_ref", "trajectory.xdd_ref"],
+                    ["m", "m/s", "m/s²"], list("xyz"),
+                    "TCP reference: LSPB moves through the waypoints (queen's gambit)")
 
 
 def joint_reference(result: Result, path: Path) -> Path:
     """Seed Fig. 3: joint references from the IK block."""
-    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
-    for ax, base, unit, title in zip(axes, ("q_ref", "qd_ref", "qdd_ref"), ("rad", "rad/s", "rad/s²"),
-                                     ("position", "velocity", "acceleration")):
-        v = result.vector(f"ik.{base}")
-        for j in range(v.shape[1]):
-            ax.plot(result.time, v[:, j], color=COLORS[j % 4], label=f"θ{j + 1}")
-        ax.set_ylabel(f"{title} ({unit})")
-        ax.grid(alpha=0.3)
-    axes[0].legend(ncol=4, loc="upper right")
-    axes[0].set_title("Joint-space reference (closed-form IK, analytic rates)")
-    axes[-1].set_xlabel("time (s)")
-    return _save(fig, path)
+    n = result.vector("ik.q_ref").shape[1]
+    return _profile(result, path, ["ik.q_ref", "ik.qd_ref", "ik.qdd_ref"], ["rad", "rad/s", "rad/s²"],
+                    [f"θ{j + 1}" for j in range(n)], "Joint-space reference (closed-form IK, analytic rates)")
 
 
 def tracking(result: Result, path: Path, title: str) -> Path:

@@ -30,6 +30,7 @@ demo: $(FMU_STAMP)
 
 bench: $(FMU_STAMP)
 	$(PY) benchmarks/run.py
+	$(PY) benchmarks/loop.py
 
 clean:
 	rm -rf fmus results .pytest_cache

@@ -46,6 +46,21 @@ def _run(args) -> int:
     return 0
 
 
+def _ssp(args) -> int:
+    from robofmu.system.experiment import load
+    from robofmu.system.master import DiagramError
+    from robofmu.system.ssp import export_ssp
+
+    try:
+        system = load(args.experiment, fmu_dir=args.fmus)
+        out = Path(args.out or f"{system.name}.ssp")
+        print(export_ssp(system, out, inline=args.inline))
+    except (ValueError, DiagramError) as exc:
+        print(f"robofmu ssp: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def _demo(args) -> int:
     from robofmu.system.demo import demo
 
@@ -78,6 +93,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"], help="master algorithm")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.set_defaults(func=_run)
+
+    p = sub.add_parser("ssp", help="export an experiment as an SSP 1.0 package (.ssp)",
+                       description="Write the experiment's diagram, FMUs and parameter sets as an SSP "
+                                   "1.0 package that libcosim and fmpy.ssp can run.")
+    p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
+    p.add_argument("--out", metavar="FILE", help="output file (default: EXPERIMENT.ssp)")
+    p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
+    p.add_argument("--inline", action="store_true", help="parameter sets inline in the SSD, not .ssv files")
+    p.set_defaults(func=_ssp)
 
     from robofmu.system.stepresponse import add_step_command
     add_step_command(sub)

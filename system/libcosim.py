@@ -34,6 +34,14 @@ def to_ns(t: float) -> int:
     return int(round(float(t) * NANO))
 
 
+def _set_log_level(level: str | None) -> None:
+    """libcosim's console log level, process-wide (None: leave it)."""
+    if level is not None:
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+
+        log_output_level(CosimLogLevel[level.upper()])
+
+
 class CosimError(RuntimeError):
     """A libcosim call failed; the message carries libcosim's last error message."""
 
@@ -67,24 +75,54 @@ class CosimRun:
         it as it is.
     """
 
-    def __init__(self, step_size: float = 1e-3, log_level: str | None = "WARNING"):
+    def __init__(self, step_size: float = 1e-3, log_level: str | None = "WARNING", *,
+                 execution=None, last_value: bool = True):
         from libcosimpy.CosimExecution import CosimExecution
-        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
         from libcosimpy.CosimManipulator import CosimManipulator
         from libcosimpy.CosimObserver import CosimObserver
 
-        if log_level is not None:
-            log_output_level(CosimLogLevel[log_level.upper()])
+        _set_log_level(log_level)
         if not step_size > 0:
             raise ValueError(f"step_size must be > 0 s, got {step_size}")
         self.step_size = float(step_size)
-        self.execution = CosimExecution.from_step_size(to_ns(step_size))
-        self.observer = CosimObserver.create_last_value()
-        self._check(self.execution.add_observer(self.observer), "add last-value observer")
-        self.manipulator = CosimManipulator.create_override()
-        self._check(self.execution.add_manipulator(self.manipulator), "add override manipulator")
+        self.execution = CosimExecution.from_step_size(to_ns(step_size)) if execution is None else execution
+        self.observer = self.manipulator = None
+        if last_value:
+            self.observer = CosimObserver.create_last_value()
+            self._check(self.execution.add_observer(self.observer), "add last-value observer")
+            self.manipulator = CosimManipulator.create_override()
+            self._check(self.execution.add_manipulator(self.manipulator), "add override manipulator")
         self.slaves: dict[str, _Slave] = {}
         self.time_series = None
+
+    @classmethod
+    def from_ssp(cls, path: str | Path, step_size: float, log_level: str | None = "WARNING",
+                 last_value: bool = True) -> "CosimRun":
+        """An execution loaded by libcosim from an SSP package (its slaves, connections and
+        parameter sets). ``last_value=False`` leaves out the last-value observer (it reads every
+        variable of every slave after every step) and the override manipulator: ``get`` and
+        ``override`` are then unavailable."""
+        from libcosimpy.CosimExecution import CosimExecution
+
+        _set_log_level(log_level)
+        path = Path(path)
+        try:
+            execution = CosimExecution.from_ssp_file(str(path), step_size=to_ns(step_size))
+        except AssertionError:
+            raise CosimError(f"libcosim: loading {path} failed: {cls.last_error()}") from None
+        run = cls(step_size, None, execution=execution, last_value=last_value)
+        for info in execution.slave_infos():
+            index = int(info.index)
+            run.slaves[info.name.decode()] = _Slave(index, path, run._variables(index), None)
+        return run
+
+    def _variables(self, index: int) -> dict[str, CosimVariable]:
+        variables = {}
+        for v in self.execution.slave_variables(index):
+            var = CosimVariable(v.name.decode(), int(v.reference), _enum_name("CosimVariableType", v.type),
+                                _enum_name("CosimVariableCausality", v.causality))
+            variables[var.name] = var
+        return variables
 
     # -- errors ---------------------------------------------------------------------------------
     @staticmethod
@@ -116,12 +154,7 @@ class CosimRun:
         index = self.execution.add_local_slave(local)
         if index < 0:
             raise CosimError(f"libcosim: adding {name} ({path}) failed: {self.last_error()}")
-        variables = {}
-        for v in self.execution.slave_variables(index):
-            var = CosimVariable(v.name.decode(), int(v.reference), _enum_name("CosimVariableType", v.type),
-                                _enum_name("CosimVariableCausality", v.causality))
-            variables[var.name] = var
-        self.slaves[name] = _Slave(index, path, variables, local)
+        self.slaves[name] = _Slave(index, path, self._variables(index), local)
         return index
 
     def index(self, instance: str) -> int:

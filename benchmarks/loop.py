@@ -1,0 +1,313 @@
+"""Benchmark: the whole chess-pd task (13 s) through the robofmu master, the same block logic in one
+Python loop without FMI, and libcosim on the SSP export of the same diagram.
+
+    .venv/bin/python benchmarks/loop.py [--fmus fmus] [--steps 0.001 0.005] [--stop 13]
+
+Runners (each in a fresh child process, one after the other):
+
+- ``robofmu``: ``Master(system).run(stop, h)`` (Gauss-Seidel), every output recorded;
+- ``in-process``: :func:`inprocess_loop`, the FMI-free logic (WaypointTrajectory.evaluate and
+  grip, make_ik(robot).solve, ComputedTorque.torque/advance, Plant.step) called in the master's
+  evaluation order with the master's exchange, the same outputs recorded into a preallocated
+  array: it must reproduce the master to rounding (the correctness lines);
+- ``libcosim``: :func:`robofmu.system.ssp.run_ssp_libcosim` on ``export_ssp(system)``
+  (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
+  observer, Booleans cannot be).
+
+Columns: ``wall`` is the whole call (loading and initializing the FMUs included; for libcosim
+also unpacking the SSP), ``per step`` the stepping loop alone divided by the number of steps
+(``ratio`` compares these), ``peak memory`` the child's peak resident set size
+(``VmHWM`` of ``/proc/self/status`` after the run, see :func:`_peak_mb`: interpreter, NumPy,
+Pinocchio and, for FMU runners, the FMU libraries and their instances included); ``imports`` is
+the same high-water mark taken before the run starts. Times are the best of ``--repeat`` fresh
+processes (default 3).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+EXPERIMENT = "chess-pd"
+RUNNERS = ("robofmu", "in-process", "libcosim")
+
+
+def _peak_mb() -> float:
+    """Peak resident set size of this process (MB): VmHWM of /proc/self/status.
+
+    Not ``getrusage(RUSAGE_SELF).ru_maxrss``: on Linux that high-water mark survives execve, so a
+    child started by fork + exec reports at least its parent's RSS at the fork (here ~100 MB
+    of NumPy, Pinocchio and the SSP export), not its own peak. ru_maxrss is the fallback where
+    /proc is missing."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0          # kB
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0     # Linux: KiB
+
+
+# -- the same blocks without FMI --------------------------------------------------------------------
+def inprocess_loop(system, stop_time: float, h: float, exchange: str = "gauss-seidel"):
+    """Run the chess loop of ``system`` (a chess-loop experiment) without FMI.
+
+    The blocks are evaluated in the master's Gauss-Seidel order (trajectory, ik, plant,
+    controller: the plant's outputs depend on no input, so the master places it before the
+    controller, which reads q and qd); the plant's torque input, produced by a block evaluated
+    after it, is set once the pass is over, so tau(t) drives the plant's step from t to t + h;
+    then every block steps. ``exchange="stale-tau"`` reads the plant's torque when the plant is
+    evaluated instead (tau of the previous point, 0 in the first step), which is what the master
+    of commit 0459557 did.
+
+    Returns (times, columns, data, loop wall time in s) with the master's columns (Real outputs
+    in evaluation order, then Booleans).
+    """
+    from robofmu.components.control import ComputedTorque
+    from robofmu.components.fmi.plant import scenario_start
+    from robofmu.components.ik import Unreachable, make_ik
+    from robofmu.components.plant import Plant
+    from robofmu.components.robot import Robot, load_spec
+    from robofmu.components.trajectory import WaypointTrajectory
+
+    if exchange not in ("gauss-seidel", "stale-tau"):
+        raise ValueError(f"exchange {exchange!r}: 'gauss-seidel' or 'stale-tau'")
+    spec = load_spec(system.extra.get("robot", "chess"))
+    s = spec.scenario
+    params = {b.name: dict(b.parameters) for b in system.blocks}
+    tp, ip, cp, pp = (params.get(n, {}) for n in ("trajectory", "ik", "controller", "plant"))
+    gains = spec.gains("pd")
+
+    traj = WaypointTrajectory(s["waypoints"], s["durations"], tp.get("pause", s["pause"]),
+                              tp.get("cruise_factor", s["cruise_factor"]),
+                              tp.get("grip_close_after_move", s["grip_close_after_move"]),
+                              tp.get("grip_open_after_move", s["grip_open_after_move"]))
+    ik_robot = Robot(spec)
+    ik = make_ik(ik_robot, tool_pitch=ip.get("tool_pitch", spec.raw["tool_pitch"]),
+                 elbow=ip.get("elbow", spec.raw.get("elbow", "up")))
+    c_robot = Robot(spec)
+    c_robot.set_gravity(cp.get("g", spec.gravity))
+    law = ComputedTorque(c_robot, cp.get("kp", gains["kp"]), cp.get("kd", gains["kd"]), cp.get("ki", gains["ki"]))
+    c_payload = float(cp.get("payload_mass", 0.0))
+    p_robot = Robot(spec)
+    p_robot.set_gravity(pp.get("g", spec.gravity))
+    n = p_robot.n
+    plant = Plant(p_robot, pp.get("q0", scenario_start(p_robot)), pp.get("qd0", np.zeros(n)),
+                  payload_mass=pp.get("payload_mass", spec.payload_mass),
+                  max_substep=pp.get("max_substep", 1e-3))
+
+    m = traj.dim
+    columns = ([f"trajectory.{b}[{i}]" for b in ("x_ref", "xd_ref", "xdd_ref") for i in range(1, m + 1)]
+               + [f"ik.{b}[{i}]" for b in ("q_ref", "qd_ref", "qdd_ref") for i in range(1, n + 1)]
+               + [f"plant.{b}[{i}]" for b in ("q", "qd") for i in range(1, n + 1)]
+               + [f"controller.tau[{i}]" for i in range(1, n + 1)]
+               + ["trajectory.grip", "ik.reachable"])
+    n_steps = int(round(stop_time / h))
+    times = h * np.arange(n_steps + 1)                # the master's communication points
+    rec = np.empty((n_steps + 1, len(columns)))
+    sx, sxd, sxdd = slice(0, m), slice(m, 2 * m), slice(2 * m, 3 * m)
+    o = 3 * m
+    sq_ref, sqd_ref, sqdd_ref = slice(o, o + n), slice(o + n, o + 2 * n), slice(o + 2 * n, o + 3 * n)
+    o += 3 * n
+    sq, sqd, stau = slice(o, o + n), slice(o + n, o + 2 * n), slice(o + 2 * n, o + 3 * n)
+    k_grip, k_reach = len(columns) - 2, len(columns) - 1
+
+    x, xd, xdd = traj.evaluate(times[0])
+    grip = traj.grip(times[0])
+    last_q = ik.position(np.asarray(s["waypoints"][0], dtype=float))   # the IK block's start values
+    tau_in = np.zeros(n)                                                  # plant.tau start values
+    tau = np.zeros(n)
+    plant.set_grip(False)
+    wall = time.perf_counter()
+    for k in range(n_steps + 1):
+        t = times[k]
+        row = rec[k]
+        # trajectory: outputs at t (computed by the previous step)
+        row[sx], row[sxd], row[sxdd] = x, xd, xdd
+        # ik: feedthrough from x, xd, xdd at t
+        try:
+            q_ref, qd_ref, qdd_ref = ik.solve(x, xd, xdd)
+            reachable = True
+            last_q = q_ref
+        except Unreachable:
+            q_ref, qd_ref, qdd_ref, reachable = last_q, np.zeros(n), np.zeros(n), False
+        row[sq_ref], row[sqd_ref], row[sqdd_ref] = q_ref, qd_ref, qdd_ref
+        # plant: outputs its state (stale-tau: reads its torque input now, before the controller)
+        if exchange == "stale-tau":
+            tau_in = tau
+        q, qd = plant.q.copy(), plant.qd.copy()
+        row[sq], row[sqd] = q, qd
+        # controller: feedthrough from the reference, q, qd and grip at t
+        c_robot.set_payload(c_payload if grip else 0.0)
+        tau = law.torque(q_ref, qd_ref, qdd_ref, q, qd)
+        if exchange == "gauss-seidel":     # the plant's input from a later block: set after the pass
+            tau_in = tau
+        row[stau] = tau
+        row[k_grip], row[k_reach] = grip, reachable
+        if k == n_steps:
+            break
+        # every block steps from t to t + h
+        t_next = t + h
+        grip_in = grip
+        x, xd, xdd = traj.evaluate(t_next)
+        grip = traj.grip(t_next)
+        plant.set_grip(grip_in)
+        plant.step(tau_in, h, t)
+        law.advance(q_ref, q, h)
+    wall = time.perf_counter() - wall
+    return times, columns, rec, wall
+
+
+# -- one runner in this (child) process ------------------------------------------------------------------
+def child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None, out: Path) -> dict:
+    import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
+    from robofmu.system.experiment import load
+    from robofmu.system.master import Master
+
+    system = load(EXPERIMENT, fmu_dir=fmu_root)
+    n_steps = int(round(stop / h))
+    if runner == "libcosim":
+        import libcosimpy.CosimExecution  # noqa: F401  (loaded before the "imports" mark, as for the others)
+    imports_mb = _peak_mb()
+    t0 = time.perf_counter()
+    if runner == "robofmu":
+        result = Master(system).run(stop, h)
+        loop = result.info["wall_time"]
+        times, columns, data = result.time, result.columns, result.data
+    elif runner == "in-process":
+        times, columns, data, loop = inprocess_loop(system, stop, h)
+    elif runner == "in-process-stale-tau":
+        times, columns, data, loop = inprocess_loop(system, stop, h, exchange="stale-tau")
+    elif runner == "libcosim":
+        from robofmu.system.ssp import run_ssp_libcosim
+
+        result = run_ssp_libcosim(ssp, stop, h)
+        loop = result.info["wall_time"]
+        times, columns, data = result.time, result.columns, result.data
+    else:
+        raise ValueError(runner)
+    wall = time.perf_counter() - t0
+    peak = _peak_mb()
+    np.savez(out, time=times, data=data, columns=np.array(columns))
+    return {"runner": runner, "h": h, "n_steps": n_steps, "wall": wall, "loop": loop,
+            "peak_mb": peak, "imports_mb": imports_mb}
+
+
+def run_child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path, out: Path) -> dict:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", runner, "--h", repr(h),
+           "--stop", repr(stop), "--fmus", str(fmu_root), "--ssp", str(ssp), "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+    if proc.returncode != 0 or not lines:
+        raise RuntimeError(f"{runner} at h = {h}: child failed ({proc.returncode})\n{proc.stdout[-3000:]}\n"
+                           f"{proc.stderr[-3000:]}")
+    return json.loads(lines[-1][len("RESULT "):])
+
+
+def max_diff(a: Path, b: Path, pattern: str | None = None) -> tuple[float, str]:
+    """Largest |a - b| over the columns both recorded (optionally only those containing pattern),
+    and the column where it occurs ("all equal" if none differs)."""
+    A, B = np.load(a), np.load(b)
+    ca, cb = list(A["columns"]), list(B["columns"])
+    worst, where = 0.0, ""
+    for j, c in enumerate(ca):
+        if c not in cb or (pattern and pattern not in c):
+            continue
+        d = float(np.max(np.abs(A["data"][:, j] - B["data"][:, cb.index(c)])))
+        if d > worst:
+            worst, where = d, c
+    return worst, where or "all equal"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fmus", default="fmus", help="FMU root folder (holds chess/*.fmu; default fmus)")
+    parser.add_argument("--steps", type=float, nargs="+", default=[1e-3, 5e-3], help="communication steps (s)")
+    parser.add_argument("--stop", type=float, default=None, help="stop time (s; default: the experiment's, 13)")
+    parser.add_argument("--repeat", type=int, default=3, help="fresh processes per runner; best time kept")
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    parser.add_argument("--h", type=float, help=argparse.SUPPRESS)
+    parser.add_argument("--ssp", help=argparse.SUPPRESS)
+    parser.add_argument("--out", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    fmu_root = Path(args.fmus).resolve()
+
+    if args.child:
+        info = child(args.child, args.h, args.stop, fmu_root, Path(args.ssp) if args.ssp else None, Path(args.out))
+        print("RESULT " + json.dumps(info), flush=True)
+        return 0
+
+    import robofmu.components  # noqa: F401
+    from robofmu.system.experiment import load
+    from robofmu.system.ssp import export_ssp
+
+    if not (fmu_root / "chess" / "plant.fmu").is_file():
+        print(f"no FMUs in {fmu_root}/chess: run `robofmu build --out {args.fmus}` first", file=sys.stderr)
+        return 2
+    system = load(EXPERIMENT, fmu_dir=fmu_root)
+    stop = system.stop_time if args.stop is None else args.stop
+    rows, checks = [], []
+    with tempfile.TemporaryDirectory(prefix="robofmu-bench-") as tmp:
+        tmp = Path(tmp)
+        ssp = export_ssp(system, tmp / f"{EXPERIMENT}.ssp")
+        for h in args.steps:
+            got = {}
+            for runner in (*RUNNERS, "in-process-stale-tau"):
+                out = tmp / f"{runner}-{h}.npz"
+                tries = [run_child(runner, h, stop, fmu_root, ssp, out)
+                         for _ in range(args.repeat if runner in RUNNERS else 1)]
+                best = min(tries, key=lambda r: r["loop"])
+                best["wall"] = min(r["wall"] for r in tries)
+                best["peak_mb"] = max(r["peak_mb"] for r in tries)
+                got[runner] = {**best, "npz": out}
+            base = got["in-process"]["loop"] / got["in-process"]["n_steps"]
+            for runner in RUNNERS:
+                r = got[runner]
+                per = r["loop"] / r["n_steps"]
+                rows.append((runner, h, r["wall"], per * 1e6, per / base, r["peak_mb"], r["imports_mb"]))
+            d, c = max_diff(got["in-process"]["npz"], got["robofmu"]["npz"])
+            checks.append(f"h = {h * 1e3:g} ms: in-process vs robofmu master, max |diff| over all "
+                          f"{len(np.load(got['robofmu']['npz'])['columns'])} outputs = {d:.3g} ({c})")
+            d, c = max_diff(got["in-process-stale-tau"]["npz"], got["robofmu"]["npz"], "plant.q[")
+            checks.append(f"h = {h * 1e3:g} ms: in-process feeding the plant the previous point's tau "
+                          f"(the master of 0459557) vs robofmu master: max |q diff| = {d:.3g} rad ({c})")
+            d, c = max_diff(got["libcosim"]["npz"], got["robofmu"]["npz"], "plant.q[")
+            checks.append(f"h = {h * 1e3:g} ms: libcosim (Jacobi) vs robofmu master (Gauss-Seidel): "
+                          f"max |q diff| = {d:.3g} rad ({c})")
+
+    print(f"{EXPERIMENT}, {stop:g} s task; each runner in a fresh process\n")
+    header = (f"{'runner':<12}{'h (ms)':>8}{'wall (s)':>10}{'per step (us)':>15}{'ratio to in-process':>21}"
+              f"{'peak memory (MB)':>18}{'imports (MB)':>14}")
+    print(header)
+    print("-" * len(header))
+    for runner, h, wall, per, ratio, peak, imp in rows:
+        print(f"{runner:<12}{h * 1e3:>8g}{wall:>10.2f}{per:>15.1f}{ratio:>21.2f}{peak:>18.1f}{imp:>14.1f}")
+    print(f"\nbest of {args.repeat} fresh processes. wall: whole call incl. loading/initializing the FMUs "
+          "(libcosim: also unpacking the SSP);\nper step: stepping loop only; peak memory: VmHWM of the "
+          "child process after the run (imports: the same before the run).\n")
+    for line in checks:
+        print(line)
+    print()
+    for h in args.steps:
+        per = {r: p for r, hh, _, p, *_ in rows if hh == h}
+        walls = {r: w for r, hh, w, *_ in rows if hh == h}
+        print(f"h = {h * 1e3:g} ms: robofmu no slower than libcosim: "
+              f"{'met' if per['robofmu'] <= per['libcosim'] else 'NOT met'} per step "
+              f"({per['robofmu']:.0f} vs {per['libcosim']:.0f} us), "
+              f"{'met' if walls['robofmu'] <= walls['libcosim'] else 'NOT met'} in wall time "
+              f"({walls['robofmu']:.2f} vs {walls['libcosim']:.2f} s); "
+              f"robofmu <= 2x in-process: {'met' if per['robofmu'] <= 2 * per['in-process'] else 'NOT met'} "
+              f"({per['robofmu'] / per['in-process']:.2f}x)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,423 @@
+"""Export a diagram as an SSP 1.0 package, and run such a package with fmpy.ssp and libcosim.
+
+:func:`export_ssp` writes ``<name>.ssp``: a zip holding ``SystemStructure.ssd`` and, under
+``resources/``, every FMU of the diagram and one SSV parameter set per block with parameters::
+
+    SystemStructure.ssd
+    resources/trajectory.fmu  resources/ik.fmu  resources/controller.fmu  resources/plant.fmu
+    resources/controller.ssv          (kp, kd, ki, payload_mass of chess-pd)
+
+The SSD declares, per component, a connector for every output and every wired input of its FMU (typed:
+``ssc:Real`` with the FMU's unit, ``ssc:Boolean``, ``ssc:Integer``, ``ssc:String``), one
+``ssd:Connection`` per scalar pair (a wire of vector bases ``ik.q_ref -> controller.q_ref`` becomes
+``q_ref[1]`` .. ``q_ref[4]``: 35 connections for the chess loop), the units used (``ssd:Units``),
+and ``ssd:DefaultExperiment`` with the start and stop time, annotated (OSP annotation
+``com.opensimulationplatform``) with a fixed-step algorithm of the diagram's step. Parameters are
+bound per component (``ssd:ParameterBinding source="resources/<block>.ssv"``; ``inline=True``
+puts the ``ssv:ParameterSet`` into the SSD instead). Vector parameters (``q0 = [..]``) are
+expanded to ``q0[1]`` .. ``q0[n]``. Namespace prefixes are exactly ``ssd``, ``ssc``, ``ssv``:
+libcosim reads the SSD with boost::property_tree, which matches prefixed names literally.
+
+What the two importers support (fmpy 0.3.32, libcosimpy 0.0.6) and how the runners cope:
+
+fmpy.ssp (``fmpy.ssp.simulation.simulate_ssp``)
+    - Reads and schema-validates the SSD, parses ParameterBindings (inline and ``.ssv``), but
+      **never applies them**: only a ``parameter_set`` argument is applied (before
+      fmi2EnterInitializationMode, names ``component.variable``). :func:`run_ssp_fmpy` collects
+      the bindings of the SSD itself and passes them as that parameter set, with typed values
+      (fmpy sets a Boolean as ``value != 0.0``, so the string ``"false"`` would become true).
+      String parameters cannot be set by fmpy.ssp at all (``set_value`` raises): refused here.
+    - Master algorithm: Jacobi. At every step each component gets the values its input
+      connectors received at the end of the previous step, does its step, and its outputs are
+      read *after* the step; then all connections are applied at once. There is **no exchange
+      at initialization**: connector values start at 0.0, so the first step runs with every
+      connected input 0 (the plant gets tau = 0: one step of free fall; ``ik`` gets x = 0,
+      outside its workspace, and holds its start solution with zero velocity and acceleration,
+      warning once), the second feeds the plant the controller's torque for all-zero inputs,
+      N(0, 0). From the third step on the exchange is libcosim's (one step of delay through
+      each feedthrough block).
+    - Time is accumulated (``time += h``): after 1500 steps of 1 ms it is 1.4999999999999456,
+      so a block evaluated at a discontinuity (the trajectory's acceleration at a move
+      boundary or blend) may see the other side of it for one step.
+    - An input connector without a connection breaks ``get_connections``: it is wired to the
+      source of the input connector examined before it (or fails with UnboundLocalError if
+      there is none), and every connected-or-not input connector would be set at every step
+      (0 unless connected). :func:`export_ssp` therefore declares connectors for the outputs and
+      the *wired* inputs only (SSP requires only connectors used by connections); unwired inputs
+      keep their start values in both tools. :func:`run_ssp_fmpy` refuses an SSD that has any.
+    - Records only connector values, one row per step *after* the step, labelled with the
+      time *before* it (the row labelled t holds the values at t + h), and no row for the start
+      time; the loop runs ``while time < stop_time`` with ``time += h`` accumulated. The runner
+      asks for ``stop_time - h/2`` (exactly n steps) and relabels: its Result has rows at
+      t0 + h .. t0 + n h.
+
+libcosim (``CosimExecution.from_ssp_file`` -> ``cosim_ssp_fixed_step_execution_create``)
+    - Loads a ``.ssp`` archive (or a folder/``.ssd``), FMUs by relative ``source``; reads
+      connector types (a connector without a type element is rejected), connections (with
+      ``ssc:LinearTransformation``), DefaultExperiment ``startTime`` and the OSP fixed-step
+      annotation; applies the **first** parameter set bound to each component (inline or
+      ``.ssv``) as initial values; a parameter it cannot apply is only logged as a warning.
+      It ignores ``stopTime``, system-level bindings and ParameterMapping.
+    - Components are stored in a hash map: slave indices do not follow the SSD order, so the
+      runner looks them up by instance name.
+    - Master algorithm: the fixed-step (Jacobi) algorithm. Initialization passes connected
+      values along in initialization mode (outputs read there), so the loop starts consistent
+      at t0 (tests/test_libcosim.py). Then at every step all slaves step from t with the inputs
+      transferred at t, outputs are read after the step and transferred: a feedthrough block's
+      output at t + h is computed from its inputs at t. The reference reaches the plant two
+      steps late (ik, controller each hold one), the measured q one step late; controller ->
+      plant adds no delay of its own (the plant has no feedthrough: it steps from t with the
+      torque read at t, as in Gauss-Seidel).
+    - Time is integer nanoseconds: no drift. Only Real variables can be recorded as time
+      series; Boolean outputs are not in the Result. A FMU failing initialization aborts the
+      process (see system/libcosim.py).
+"""
+from __future__ import annotations
+
+import fnmatch
+import math
+import time as _time
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import numpy as np
+
+from .diagram import System
+from .master import Master, Result, _unit
+
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+}
+OSP_ANNOTATION = "com.opensimulationplatform"
+SSD_NAME = "SystemStructure.ssd"
+_TYPES = {"Real": "Real", "Integer": "Integer", "Boolean": "Boolean", "String": "String"}
+
+for _prefix, _uri in NS.items():
+    ET.register_namespace(_prefix, _uri)
+
+
+def _q(tag: str) -> str:
+    prefix, name = tag.split(":")
+    return f"{{{NS[prefix]}}}{name}"
+
+
+def _fmt_real(value: float) -> str:
+    """xs:double text of a float, exact (repr) and with XML's spellings of the non-finite."""
+    value = float(value)
+    if math.isnan(value):
+        return "NaN"
+    if math.isinf(value):
+        return "INF" if value > 0 else "-INF"
+    return repr(value)
+
+
+def _scalar_names(variables: dict, base: str) -> list[str]:
+    if base in variables:
+        return [base]
+    found = sorted((int(n[len(base) + 1:-1]), n) for n in variables
+                   if n.startswith(base + "[") and n.endswith("]") and n[len(base) + 1:-1].isdigit())
+    return [n for _, n in found]
+
+
+def _parameter_values(block: str, variables: dict, parameters: dict) -> list[tuple[str, str, str]]:
+    """(scalar name, SSV type, value text) of a block's parameters, vector bases expanded."""
+    out = []
+    for base, value in parameters.items():
+        names = _scalar_names(variables, base)
+        if not names:
+            raise ValueError(f"block {block!r}: unknown parameter {base!r}")
+        values = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+        if len(values) != len(names):
+            raise ValueError(f"block {block!r}: {base} has {len(names)} elements, got {len(values)} values")
+        for name, v in zip(names, values):
+            kind = variables[name].type
+            if kind == "Real":
+                out.append((name, "Real", _fmt_real(v)))
+            elif kind == "Integer":
+                out.append((name, "Integer", str(int(v))))
+            elif kind == "Boolean":
+                out.append((name, "Boolean", "true" if bool(v) else "false"))
+            elif kind == "String":
+                out.append((name, "String", str(v)))
+            else:
+                raise ValueError(f"block {block!r}: parameter {name} has type {kind}, which this export "
+                                 "does not support (libcosim cannot take SSP enumerations either)")
+    return out
+
+
+def _parameter_set(parent, name: str, values) -> ET.Element:
+    attrs = {"version": "1.0", "name": name}
+    pset = ET.SubElement(parent, _q("ssv:ParameterSet"), attrs) if parent is not None \
+        else ET.Element(_q("ssv:ParameterSet"), attrs)
+    params = ET.SubElement(pset, _q("ssv:Parameters"))
+    for pname, kind, text in values:
+        p = ET.SubElement(params, _q("ssv:Parameter"), {"name": pname})
+        ET.SubElement(p, _q(f"ssv:{kind}"), {"value": text})
+    return pset
+
+
+def _xml_bytes(root: ET.Element) -> bytes:
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
+
+
+def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
+    """Write ``system`` as an SSP 1.0 package (``.ssp`` zip) at ``path``; returns the path.
+
+    The diagram is checked first exactly as the master checks it (FMUs valid, wires typed and
+    matching, no algebraic loop): a diagram the master refuses is not exported (DiagramError).
+
+    Parameters
+    ----------
+    system : System
+        E.g. ``experiment.load("chess-pd", fmu_dir="fmus")``.
+    path : str or Path
+        The ``.ssp`` file to write (parent folders are created).
+    inline : bool
+        Parameter sets inline in the SSD instead of ``resources/<block>.ssv`` files.
+    """
+    path = Path(path)
+    master = Master(system)
+    master.check()
+
+    # FMUs under resources/: one copy per distinct file, names made unique
+    sources: dict[Path, str] = {}
+    used: set[str] = set()
+    for spec in system.blocks:
+        fmu = system.fmu_path(spec).resolve()
+        if fmu in sources:
+            continue
+        stem, k, name = fmu.stem, 1, fmu.name
+        while name in used:
+            k += 1
+            name = f"{stem}_{k}.fmu"
+        used.add(name)
+        sources[fmu] = name
+
+    wired = {(dst, inp) for _, _, dst, inp in master.links}
+    root = ET.Element(_q("ssd:SystemStructureDescription"),
+                      {"version": "1.0", "name": system.name, "generationTool": "robofmu"})
+    sys_attrs = {"name": system.name}
+    if system.description:
+        sys_attrs["description"] = system.description
+    sys_el = ET.SubElement(root, _q("ssd:System"), sys_attrs)
+    elements = ET.SubElement(sys_el, _q("ssd:Elements"))
+    ssv_files: dict[str, bytes] = {}
+    units: dict[str, object] = {}
+    for spec in system.blocks:
+        node = master.nodes[spec.name]
+        fmu = system.fmu_path(spec).resolve()
+        comp = ET.SubElement(elements, _q("ssd:Component"),
+                             {"name": spec.name, "type": "application/x-fmu-sharedlibrary",
+                              "source": f"resources/{sources[fmu]}", "implementation": "CoSimulation"})
+        ports = [v for v in node.md.modelVariables
+                 if v.causality == "output" or (v.causality == "input" and (spec.name, v.name) in wired)]
+        connectors = ET.SubElement(comp, _q("ssd:Connectors")) if ports else None
+        for v in ports:     # unwired inputs: none (they keep their start values; fmpy.ssp could not take them)
+            kind = _TYPES.get(v.type)
+            if kind is None:
+                raise ValueError(f"block {spec.name!r}: {v.name} has type {v.type}, which this export does not "
+                                 "support (libcosim cannot take SSP enumerations either)")
+            con = ET.SubElement(connectors, _q("ssd:Connector"), {"name": v.name, "kind": v.causality})
+            attrs = {}
+            if kind == "Real" and _unit(v):
+                attrs["unit"] = _unit(v)
+            ET.SubElement(con, _q(f"ssc:{kind}"), attrs)
+        for u in node.md.unitDefinitions:
+            units.setdefault(u.name, u)
+        values = _parameter_values(spec.name, node.variables, spec.parameters)
+        if values:
+            bindings = ET.SubElement(comp, _q("ssd:ParameterBindings"))
+            set_name = f"{system.name}.{spec.name}"
+            if inline:
+                binding = ET.SubElement(bindings, _q("ssd:ParameterBinding"),
+                                        {"type": "application/x-ssp-parameter-set"})
+                _parameter_set(ET.SubElement(binding, _q("ssd:ParameterValues")), set_name, values)
+            else:
+                source = f"resources/{spec.name}.ssv"
+                ET.SubElement(bindings, _q("ssd:ParameterBinding"),
+                              {"type": "application/x-ssp-parameter-set", "source": source})
+                ssv_files[source] = _xml_bytes(_parameter_set(None, set_name, values))
+
+    connections = ET.SubElement(sys_el, _q("ssd:Connections")) if master.links else None
+    for src, out, dst, inp in master.links:
+        ET.SubElement(connections, _q("ssd:Connection"),
+                      {"startElement": src, "startConnector": out, "endElement": dst, "endConnector": inp})
+
+    used_units = {c.get("unit") for c in root.iter(_q("ssc:Real")) if c.get("unit")}
+    if used_units:
+        units_el = ET.SubElement(root, _q("ssd:Units"))
+        for name in sorted(used_units):
+            b = getattr(units.get(name), "baseUnit", None)
+            if b is None:           # not defined by the FMUs: named only
+                continue
+            attrs = {k: str(getattr(b, k)) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad") if getattr(b, k)}
+            if b.factor != 1.0:
+                attrs["factor"] = _fmt_real(b.factor)
+            if b.offset != 0.0:
+                attrs["offset"] = _fmt_real(b.offset)
+            ET.SubElement(ET.SubElement(units_el, _q("ssc:Unit"), {"name": name}), _q("ssc:BaseUnit"), attrs)
+        if not len(units_el):
+            root.remove(units_el)
+
+    exp = ET.SubElement(root, _q("ssd:DefaultExperiment"),
+                        {"startTime": "0.0", "stopTime": _fmt_real(system.stop_time)})
+    ann = ET.SubElement(ET.SubElement(exp, _q("ssd:Annotations")), _q("ssc:Annotation"),
+                        {"type": OSP_ANNOTATION})
+    ET.SubElement(ET.SubElement(ann, _q("osp:Algorithm")), _q("osp:FixedStepAlgorithm"),
+                  {"baseStepSize": _fmt_real(system.step)})
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr(SSD_NAME, _xml_bytes(root))
+        for fmu, name in sources.items():
+            zf.write(fmu, f"resources/{name}")
+        for name, data in ssv_files.items():
+            zf.writestr(name, data)
+    tmp.replace(path)
+    return path
+
+
+# -- running ------------------------------------------------------------------------------------
+def _n_steps(start_time: float, stop_time: float, step: float) -> int:
+    if not (step > 0 and math.isfinite(step)):
+        raise ValueError(f"communication step must be > 0 s, got {step}")
+    n = int(round((stop_time - start_time) / step))
+    if n < 1 or abs(start_time + n * step - stop_time) > 1e-9 * max(1.0, abs(stop_time)):
+        raise ValueError(f"stop time {stop_time} s is not start time {start_time} s plus a whole "
+                         f"number of {step} s steps")
+    return n
+
+
+def _selected(columns: list[str], record: list[str] | None) -> list[int]:
+    if record is None:
+        return list(range(len(columns)))
+    return [k for k, c in enumerate(columns) if any(fnmatch.fnmatchcase(c, p) for p in record)]
+
+
+def _fmpy_parameter_set(ssd):
+    """The parameter bindings of every component, as one fmpy ParameterSet with typed values."""
+    from fmpy.ssp.ssd import Parameter, ParameterSet, find_components
+
+    components = find_components(ssd.system)
+    names = [c.name for c in components]
+    out = ParameterSet(name="bindings")
+    for comp in components:
+        for binding in comp.parameterBindings:
+            if binding.prefix or binding.parameterMapping:
+                raise NotImplementedError(f"{comp.name}: parameter binding with a prefix or a mapping")
+            if not binding.parameterValues:
+                continue
+            pset = binding.parameterValues[0]     # as libcosim: the first set of a binding
+            for p in pset.parameters:
+                if p.type == "Real":
+                    value = float(p.value)
+                elif p.type == "Integer":
+                    value = int(p.value)
+                elif p.type == "Boolean":
+                    value = p.value.strip().lower() in ("true", "1")
+                else:
+                    raise NotImplementedError(f"{comp.name}.{p.name}: fmpy.ssp cannot set a {p.type} parameter")
+                out.parameters.append(Parameter(name=f"{comp.name}.{p.name}", type=p.type, value=value))
+    # fmpy matches a parameter to a component by string prefix: "plant2.x" also starts with "plant"
+    clash = [(a, b) for a in names for b in names if a != b and b.startswith(a)]
+    if clash and out.parameters:
+        raise NotImplementedError(f"fmpy.ssp would mix up the parameters of components {clash[0]}")
+    return out
+
+
+def run_ssp_fmpy(path: str | Path, stop_time: float, step: float, start_time: float = 0.0,
+                 record: list[str] | None = None) -> Result:
+    """Simulate an SSP with ``fmpy.ssp.simulation.simulate_ssp`` (Jacobi, see the module notes).
+
+    Parameter bindings of the SSD are applied (fmpy would ignore them) as start values before
+    initialization. Returns a :class:`~robofmu.system.master.Result` with the output connectors
+    (``instance.variable``, Booleans as 0/1) matching ``record`` (fnmatch patterns; default
+    all), at t0 + h .. t0 + n h (fmpy records no row for the start time).
+    """
+    from fmpy.ssp.simulation import simulate_ssp
+    from fmpy.ssp.ssd import find_components, read_ssd
+
+    path = Path(path)
+    n = _n_steps(start_time, stop_time, step)
+    ssd = read_ssd(str(path))
+    connected = {(c.endElement, c.endConnector) for c in ssd.system.connections}
+    loose = [f"{comp.name}.{con.name}" for comp in find_components(ssd.system) for con in comp.connectors
+             if con.kind == "input" and (comp.name, con.name) not in connected]
+    if loose:
+        raise ValueError(f"{path.name}: fmpy.ssp cannot run an SSD with unconnected input connectors "
+                         f"({', '.join(loose)}): it wires each to the source of the input before it, "
+                         "or fails; remove them (unwired inputs then keep their start values)")
+    outputs = {f"{comp.name}.{con.name}" for comp in find_components(ssd.system)
+               for con in comp.connectors if con.kind == "output"}
+    parameters = _fmpy_parameter_set(ssd)
+    wall = _time.perf_counter()
+    # fmpy loops `while time < stop_time: ...; time += h`: ask for half a step less than the
+    # stop time so that accumulated rounding can neither add nor drop a step
+    rows = simulate_ssp(str(path), start_time=start_time, stop_time=start_time + (n - 0.5) * step,
+                        step_size=step, parameter_set=parameters if parameters.parameters else None)
+    wall = _time.perf_counter() - wall
+    if len(rows) != n:
+        raise RuntimeError(f"fmpy.ssp made {len(rows)} steps, expected {n}")
+    names = [c for c in rows.dtype.names[1:] if c in outputs]
+    keep = [names[k] for k in _selected(names, record)]
+    data = np.column_stack([rows[c].astype(float) for c in keep]) if keep else np.zeros((n, 0))
+    return Result(start_time + step * np.arange(1, n + 1), keep, data,
+                  {"tool": "fmpy.ssp", "algorithm": "jacobi (no initial exchange)", "step": step,
+                   "wall_time": wall})
+
+
+def run_ssp_libcosim(path: str | Path, stop_time: float, step: float, start_time: float = 0.0,
+                     record: list[str] | None = None, log_level: str | None = "WARNING") -> Result:
+    """Simulate an SSP with libcosim's fixed-step algorithm (see the module notes).
+
+    ``start_time`` must be the SSD's DefaultExperiment start time (libcosim starts there).
+    Returns a :class:`~robofmu.system.master.Result` with the Real outputs matching ``record``
+    (fnmatch patterns on ``instance.variable``; default all Real outputs) at t0, t0 + h, ..,
+    t0 + n h, recorded by a time-series observer (Boolean outputs cannot be recorded).
+    """
+    from .libcosim import NANO, CosimRun
+
+    path = Path(path)
+    n = _n_steps(start_time, stop_time, step)
+    run = CosimRun.from_ssp(path, step, log_level, last_value=False)
+    try:
+        t0 = run.execution.status().current_time / NANO
+        if abs(t0 - start_time) > 1e-9:
+            raise ValueError(f"{path.name} starts at t = {t0} s, not {start_time} s")
+        candidates = [(inst, v.name) for inst, slave in run.slaves.items() for v in slave.variables.values()
+                      if v.causality == "OUTPUT" and v.type == "REAL"]
+        candidates.sort(key=lambda c: (run.slaves[c[0]].index, run.slaves[c[0]].variables[c[1]].reference))
+        columns = [f"{i}.{v}" for i, v in candidates]
+        keep = [candidates[k] for k in _selected(columns, record)]
+        for inst, name in keep:
+            run.observe_series(inst, name, buffer_size=n + 1)
+        wall = _time.perf_counter()
+        run.step(n)
+        wall = _time.perf_counter() - wall
+        data = np.empty((n + 1, len(keep)))
+        times = None
+        for j, (inst, name) in enumerate(keep):
+            t, steps, values = run.series(inst, name, count=n + 1)
+            if len(values) != n + 1:
+                raise RuntimeError(f"libcosim recorded {len(values)} samples of {inst}.{name}, expected {n + 1}")
+            data[:, j] = values
+            times = np.asarray(t)
+        if times is None:
+            times = start_time + step * np.arange(n + 1)
+        return Result(times, [f"{i}.{v}" for i, v in keep], data,
+                      {"tool": "libcosim", "algorithm": "jacobi (libcosim fixed-step)", "step": step,
+                       "wall_time": wall})
+    finally:
+        run.close()
+
+
+def ssd_text(path: str | Path) -> str:
+    """The SystemStructure.ssd of an SSP package, as text."""
+    with zipfile.ZipFile(path) as zf:
+        return zf.read(SSD_NAME).decode("utf-8")

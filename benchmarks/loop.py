@@ -57,16 +57,14 @@ def _peak_mb() -> float:
 
 
 # -- the same blocks without FMI --------------------------------------------------------------------
-def inprocess_loop(system, stop_time: float, h: float, exchange: str = "gauss-seidel"):
+def inprocess_loop(system, stop_time: float, h: float):
     """Run the chess loop of ``system`` (a chess-loop experiment) without FMI.
 
     The blocks are evaluated in the master's Gauss-Seidel order (trajectory, ik, plant,
     controller: the plant's outputs depend on no input, so the master places it before the
     controller, which reads q and qd); the plant's torque input, produced by a block evaluated
     after it, is set once the pass is over, so tau(t) drives the plant's step from t to t + h;
-    then every block steps. ``exchange="stale-tau"`` reads the plant's torque when the plant is
-    evaluated instead (tau of the previous point, 0 in the first step), which is what the master
-    of commit 0459557 did.
+    then every block steps.
 
     Returns (times, columns, data, loop wall time in s) with the master's columns (Real outputs
     in evaluation order, then Booleans).
@@ -78,8 +76,6 @@ def inprocess_loop(system, stop_time: float, h: float, exchange: str = "gauss-se
     from robofmu.components.robot import Robot, load_spec
     from robofmu.components.trajectory import WaypointTrajectory
 
-    if exchange not in ("gauss-seidel", "stale-tau"):
-        raise ValueError(f"exchange {exchange!r}: 'gauss-seidel' or 'stale-tau'")
     spec = load_spec(system.extra.get("robot", "chess"))
     s = spec.scenario
     params = {b.name: dict(b.parameters) for b in system.blocks}
@@ -140,16 +136,13 @@ def inprocess_loop(system, stop_time: float, h: float, exchange: str = "gauss-se
         except Unreachable:
             q_ref, qd_ref, qdd_ref, reachable = last_q, np.zeros(n), np.zeros(n), False
         row[sq_ref], row[sqd_ref], row[sqdd_ref] = q_ref, qd_ref, qdd_ref
-        # plant: outputs its state (stale-tau: reads its torque input now, before the controller)
-        if exchange == "stale-tau":
-            tau_in = tau
+        # plant: outputs its state
         q, qd = plant.q.copy(), plant.qd.copy()
         row[sq], row[sqd] = q, qd
         # controller: feedthrough from the reference, q, qd and grip at t
         c_robot.set_payload(c_payload if grip else 0.0)
         tau = law.torque(q_ref, qd_ref, qdd_ref, q, qd)
-        if exchange == "gauss-seidel":     # the plant's input from a later block: set after the pass
-            tau_in = tau
+        tau_in = tau                       # the plant's input from a later block: set after the pass
         row[stau] = tau
         row[k_grip], row[k_reach] = grip, reachable
         if k == n_steps:
@@ -184,8 +177,6 @@ def child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None, 
         times, columns, data = result.time, result.columns, result.data
     elif runner == "in-process":
         times, columns, data, loop = inprocess_loop(system, stop, h)
-    elif runner == "in-process-stale-tau":
-        times, columns, data, loop = inprocess_loop(system, stop, h, exchange="stale-tau")
     elif runner == "libcosim":
         from robofmu.system.ssp import run_ssp_libcosim
 
@@ -260,10 +251,10 @@ def main(argv=None) -> int:
         ssp = export_ssp(system, tmp / f"{EXPERIMENT}.ssp")
         for h in args.steps:
             got = {}
-            for runner in (*RUNNERS, "in-process-stale-tau"):
+            for runner in RUNNERS:
                 out = tmp / f"{runner}-{h}.npz"
                 tries = [run_child(runner, h, stop, fmu_root, ssp, out)
-                         for _ in range(args.repeat if runner in RUNNERS else 1)]
+                         for _ in range(args.repeat)]
                 best = min(tries, key=lambda r: r["loop"])
                 best["wall"] = min(r["wall"] for r in tries)
                 best["peak_mb"] = max(r["peak_mb"] for r in tries)
@@ -276,9 +267,6 @@ def main(argv=None) -> int:
             d, c = max_diff(got["in-process"]["npz"], got["robofmu"]["npz"])
             checks.append(f"h = {h * 1e3:g} ms: in-process vs robofmu master, max |diff| over all "
                           f"{len(np.load(got['robofmu']['npz'])['columns'])} outputs = {d:.3g} ({c})")
-            d, c = max_diff(got["in-process-stale-tau"]["npz"], got["robofmu"]["npz"], "plant.q[")
-            checks.append(f"h = {h * 1e3:g} ms: in-process feeding the plant the previous point's tau "
-                          f"(the master of 0459557) vs robofmu master: max |q diff| = {d:.3g} rad ({c})")
             d, c = max_diff(got["libcosim"]["npz"], got["robofmu"]["npz"], "plant.q[")
             checks.append(f"h = {h * 1e3:g} ms: libcosim (Jacobi) vs robofmu master (Gauss-Seidel): "
                           f"max |q diff| = {d:.3g} rad ({c})")

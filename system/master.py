@@ -24,7 +24,6 @@ from typing import Callable
 
 import numpy as np
 from fmpy import read_model_description
-from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2True
 
 from .diagram import System, Wire
@@ -363,94 +362,83 @@ class Master:
         self.columns = [columns[k] for k in keep]
         self.keep = np.array(keep, dtype=np.intp)
 
+    def _operations(self, algorithm: str):
+        """One exchange and one step as flat lists of closures over preallocated buffers.
+
+        Gauss-Seidel: for each block in evaluation order, set its inputs from blocks evaluated
+        before it, then read its outputs; after the pass, set the inputs that come from blocks
+        evaluated later. Jacobi: read every output, then set every input.
+        """
+        sig, bsig = self.sig, self.bsig
+        early, pull, late, steps = [], [], [], []
+        for name in self.order:
+            fn = _Raw(self.blocks[name].slave)
+            get_r, get_b, inputs_early, inputs_late = self.ports[name]
+            ops = []
+            for port, f, call in ((get_r, fn.get_real, "fmi2GetReal"), (get_b, fn.get_bool, "fmi2GetBoolean")):
+                if port.n:
+                    ops.append(_get(f, fn.c, port, name, call))
+            pull.append(ops)
+            early.append(_sets(fn, inputs_early, sig, bsig, name))
+            late.append(_sets(fn, inputs_late, sig, bsig, name))
+            steps.append(_step(fn, name))
+        if algorithm == "gauss-seidel":
+            exchange = [op for e, p in zip(early, pull) for op in e + p] + [op for ops in late for op in ops]
+        else:
+            exchange = [op for ops in pull for op in ops] + [op for e, lt in zip(early, late) for op in e + lt]
+        first = [op for e, p in zip(early, pull) for op in e + p] + [op for ops in late for op in ops]
+        return first, exchange, steps
+
     def _loop(self, t0: float, h: float, n_steps: int, algorithm: str, csv_path) -> Result:
         self._layout()
-        nr = len(self.sig)
-        row = np.zeros(nr + len(self.bsig))
+        sig, bsig = self.sig, self.bsig
+        nr = len(sig)
+        row = np.zeros(nr + len(bsig))
+        record_all = np.array_equal(self.keep, np.arange(len(row)))
         rec = np.empty((n_steps + 1, len(self.keep)))
         times = t0 + h * np.arange(n_steps + 1)
-        order = [(name, _Raw(self.blocks[name].slave), self.ports[name]) for name in self.order]
+        first, exchange, steps = self._operations(algorithm)
         every = max(1, n_steps // 20)
-        current, t, k, n_rec = None, t0, 0, 0
+        t, k, n_rec = t0, 0, 0
         wall = _time.perf_counter()
-        sig, bsig = self.sig, self.bsig
-
-        def pull(name, fn, ports):
-            get_r, get_b = ports[0], ports[1]
-            if get_r.n:
-                status = fn.get_real(fn.c, get_r.vr, get_r.n, get_r.c)
-                if status > 1:
-                    raise FMICallException("fmi2GetReal", status)
-            if get_b.n:
-                status = fn.get_bool(fn.c, get_b.vr, get_b.n, get_b.c)
-                if status > 1:
-                    raise FMICallException("fmi2GetBoolean", status)
-
-        def push(fn, inputs: "_Inputs"):
-            set_r, set_b = inputs.real, inputs.boolean
-            if set_r.n:
-                np.take(sig, inputs.src_r, out=set_r.buffer)
-                status = fn.set_real(fn.c, set_r.vr, set_r.n, set_r.c)
-                if status > 1:
-                    raise FMICallException("fmi2SetReal", status)
-            if set_b.n:           # discrete inputs: set only when they change
-                np.take(bsig, inputs.src_b, out=set_b.buffer)
-                if not np.array_equal(set_b.buffer, inputs.last_b):
-                    status = fn.set_bool(fn.c, set_b.vr, set_b.n, set_b.c)
-                    if status > 1:
-                        raise FMICallException("fmi2SetBoolean", status)
-                    inputs.last_b[:] = set_b.buffer
-
         try:
             for k in range(n_steps + 1):
                 t = times[k]
-                if algorithm == "gauss-seidel" or k == 0:   # Jacobi, too, starts consistent
-                    for current, fn, ports in order:
-                        push(fn, ports[2])
-                        pull(current, fn, ports)
-                    for current, fn, ports in order:
-                        push(fn, ports[3])
-                else:
-                    for current, fn, ports in order:
-                        pull(current, fn, ports)
-                    for current, fn, ports in order:
-                        push(fn, ports[2])
-                        push(fn, ports[3])
-                current = None
-                if not np.isfinite(sig).all():
+                for op in (first if k == 0 else exchange):    # Jacobi, too, starts consistent
+                    op()
+                if not math.isfinite(sig.dot(sig)) and not np.isfinite(sig).all():
                     bad = self.real_names[int(np.flatnonzero(~np.isfinite(sig))[0])]
-                    block = bad.split(".")[0]
-                    raise _Failure(block, f"output {bad} is not finite ({sig[self.real_names.index(bad)]}) "
-                                          f"at t = {t:.9g} s")
-                row[:nr] = sig
-                row[nr:] = bsig
-                rec[k] = row[self.keep]
+                    raise _Failure(bad.split(".")[0], f"output {bad} is not finite "
+                                   f"({sig[self.real_names.index(bad)]}) at t = {t:.9g} s")
+                if record_all:
+                    rec[k, :nr] = sig
+                    rec[k, nr:] = bsig
+                else:
+                    row[:nr] = sig
+                    row[nr:] = bsig
+                    rec[k] = row[self.keep]
                 n_rec = k + 1
                 if k == n_steps:
                     break
-                for current, fn, ports in order:
-                    status = fn.do_step(fn.c, t, h, fmi2True)
-                    if status > 1:
-                        raise FMICallException("fmi2DoStep", status)
-                current = None
+                for op in steps:
+                    op(t, h)
                 if self.progress is not None and (k + 1) % every == 0:
                     self.progress((k + 1) / n_steps, t + h)
-        except (FMICallException, _Failure) as exc:
-            name = exc.block if isinstance(exc, _Failure) else current
-            if isinstance(exc, _Failure):
-                message = f"{exc.block}: {exc.message}"
+        except _Failure as exc:
+            if exc.call:
+                logged = [m.message for m in self.blocks[exc.block].messages
+                          if m.status in ("ERROR", "FATAL", "DISCARD")]
+                message = (f"{exc.block}: {exc.call} failed at t = {t:.9g} s"
+                           + (": " + logged[-1] if logged else f" (status {exc.message})"))
             else:
-                logged = [m.message for m in self.blocks[name].messages if m.status in ("ERROR", "FATAL", "DISCARD")]
-                what = str(exc).split(" failed")[0]
-                message = (f"{name}: {what} failed at t = {t:.9g} s"
-                           + (": " + logged[-1] if logged else f" ({exc})"))
+                message = f"{exc.block}: {exc.message}"
             result = Result(times[:n_rec].copy(), list(self.columns), rec[:n_rec].copy(),
                             {"failed": message, "algorithm": algorithm, "step": h})
             if csv_path is not None:
                 result.to_csv(csv_path)
             raise SimulationError(message + (f"\nresults up to t = {times[n_rec - 1]:.9g} s kept"
                                              + (f" in {csv_path}" if csv_path else "") if n_rec else ""),
-                                  name, float(t), result) from None
+                                  exc.block, float(t), result) from None
         result = Result(times, list(self.columns), rec,
                         {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall,
                          "order": list(self.order)})
@@ -475,7 +463,7 @@ class _Inputs:
                              np.zeros(len(bl), dtype=np.int32), ctypes.c_int)
         self.src_r = np.array([ridx[(s, o)] for s, o, _, _ in rl], dtype=np.intp)
         self.src_b = np.array([bidx[(s, o)] for s, o, _, _ in bl], dtype=np.intp)
-        self.last_b = np.full(len(bl), -1, dtype=np.int32)
+        self.last_b = b""          # bytes of the values last set (none yet)
 
 
 class _Raw:
@@ -491,10 +479,63 @@ class _Raw:
 
 
 class _Failure(Exception):
-    def __init__(self, block: str, message: str):
+    """A block failed: an FMI call returned an error status (``call`` set), or an output is bad."""
+
+    def __init__(self, block: str, message: str, call: str | None = None):
         super().__init__(message)
         self.block = block
         self.message = message
+        self.call = call
+
+
+_STATUS = ["ok", "warning", "discard", "error", "fatal", "pending"]
+
+
+def _status(status: int) -> str:
+    return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+
+
+def _get(f, c, port: _Port, name: str, call: str):
+    """A closure reading one block's outputs of one type into the signal vector."""
+    def op(f=f, c=c, vr=port.vr, n=port.n, buf=port.c):
+        status = f(c, vr, n, buf)
+        if status > 1:
+            raise _Failure(name, _status(status), call)
+    return op
+
+
+def _sets(fn: _Raw, inputs: _Inputs, sig, bsig, name: str) -> list:
+    """Closures setting one block's inputs (of one phase) from the signal vectors."""
+    ops = []
+    real, boolean = inputs.real, inputs.boolean
+    if real.n:
+        def set_real(take=sig.take, src=inputs.src_r, out=real.buffer, f=fn.set_real, c=fn.c, vr=real.vr,
+                     n=real.n, buf=real.c):
+            take(src, out=out)
+            status = f(c, vr, n, buf)
+            if status > 1:
+                raise _Failure(name, _status(status), "fmi2SetReal")
+        ops.append(set_real)
+    if boolean.n:
+        def set_boolean(take=bsig.take, src=inputs.src_b, out=boolean.buffer, f=fn.set_bool, c=fn.c,
+                        vr=boolean.vr, n=boolean.n, buf=boolean.c):
+            take(src, out=out)
+            now = out.tobytes()
+            if now != inputs.last_b:       # discrete inputs: set only when they change
+                status = f(c, vr, n, buf)
+                if status > 1:
+                    raise _Failure(name, _status(status), "fmi2SetBoolean")
+                inputs.last_b = now
+        ops.append(set_boolean)
+    return ops
+
+
+def _step(fn: _Raw, name: str):
+    def op(t, h, f=fn.do_step, c=fn.c):
+        status = f(c, t, h, fmi2True)
+        if status > 1:
+            raise _Failure(name, _status(status), "fmi2DoStep")
+    return op
 
 
 def _unit(v) -> str | None:

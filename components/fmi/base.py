@@ -233,7 +233,7 @@ class BlockSlave(Fmi2Slave):
     def _index(self, vrs, allowed: np.ndarray, call: str) -> np.ndarray:
         """Value references as an index array, checked once per distinct list (importers batch
         the same references at every step)."""
-        key = (call, *vrs)
+        key = (allowed is self._real, *vrs)
         index = self._indices.get(key)
         if index is None:
             index = np.asarray(vrs, dtype=np.intp)
@@ -357,9 +357,11 @@ class BlockSlave(Fmi2Slave):
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:
-            bad = self.nonfinite_input()
-            if bad is not None:
-                return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
+            # a feedthrough block whose outputs are up to date has checked these inputs already
+            if self._dirty or not self.feedthrough:
+                bad = self.nonfinite_input()
+                if bad is not None:
+                    return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
             if self.feedthrough and self._dirty:
                 self.evaluate()
             ok = self.step(current_time, step_size)

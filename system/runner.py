@@ -9,7 +9,7 @@ from pathlib import Path
 from robofmu.components.robot import Robot, load_spec
 
 from . import analysis, experiment, plots
-from .master import Master, Result, SimulationError
+from .master import Master, Result
 
 
 def progress_printer(label: str, stream=sys.stderr):
@@ -51,10 +51,7 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     master = Master(system, progress=progress_printer(name) if progress else None)
     for w in master.check():
         print(f"warning: {w}", file=sys.stderr)
-    try:
-        result = master.run(stop_time=stop_time, step=step, algorithm=algorithm, csv_path=out / "results.csv")
-    except SimulationError:
-        raise
+    result = master.run(stop_time=stop_time, step=step, algorithm=algorithm, csv_path=out / "results.csv")
     robot_name = system.extra.get("robot", "chess")
     spec = load_spec(robot_name)
     metrics = analysis.tracking(result, Robot(spec), analysis.chess_events(spec))

@@ -32,6 +32,17 @@ from .fmu import Block, FMUError, LogMessage
 ALGORITHMS = ("gauss-seidel", "jacobi")
 
 
+def step_count(start_time: float, stop_time: float, step: float) -> int:
+    """Number of communication steps of ``step`` s from start to stop; ValueError unless whole."""
+    if not (step > 0 and math.isfinite(step)):
+        raise ValueError(f"communication step must be > 0 s, got {step}")
+    n = int(round((stop_time - start_time) / step))
+    if n < 1 or abs(start_time + n * step - stop_time) > 1e-9 * max(1.0, abs(stop_time)):
+        raise ValueError(f"stop time {stop_time} s is not start time {start_time} s plus a whole "
+                         f"number of {step} s steps")
+    return n
+
+
 class DiagramError(ValueError):
     """The diagram cannot run; ``problems`` lists every reason, each naming blocks and variables."""
 
@@ -295,12 +306,7 @@ class Master:
         algorithm = s.algorithm if algorithm is None else algorithm
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(ALGORITHMS)}")
-        if not (h > 0 and math.isfinite(h)):
-            raise ValueError(f"communication step must be > 0 s, got {h}")
-        n_steps = int(round((stop_time - start_time) / h))
-        if n_steps < 1 or abs(start_time + n_steps * h - stop_time) > 1e-9 * max(1.0, abs(stop_time)):
-            raise ValueError(f"stop time {stop_time} s is not start time {start_time} s plus a whole "
-                             f"number of {h} s steps")
+        n_steps = step_count(start_time, stop_time, h)
         if not self._checked:
             self.check()
         try:

@@ -84,7 +84,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from .diagram import System
-from .master import Master, Result, _unit
+from .master import Master, Result, _unit, step_count
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -284,16 +284,6 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
 
 
 # -- running ------------------------------------------------------------------------------------
-def _n_steps(start_time: float, stop_time: float, step: float) -> int:
-    if not (step > 0 and math.isfinite(step)):
-        raise ValueError(f"communication step must be > 0 s, got {step}")
-    n = int(round((stop_time - start_time) / step))
-    if n < 1 or abs(start_time + n * step - stop_time) > 1e-9 * max(1.0, abs(stop_time)):
-        raise ValueError(f"stop time {stop_time} s is not start time {start_time} s plus a whole "
-                         f"number of {step} s steps")
-    return n
-
-
 def _selected(columns: list[str], record: list[str] | None) -> list[int]:
     if record is None:
         return list(range(len(columns)))
@@ -344,7 +334,7 @@ def run_ssp_fmpy(path: str | Path, stop_time: float, step: float, start_time: fl
     from fmpy.ssp.ssd import find_components, read_ssd
 
     path = Path(path)
-    n = _n_steps(start_time, stop_time, step)
+    n = step_count(start_time, stop_time, step)
     ssd = read_ssd(str(path))
     connected = {(c.endElement, c.endConnector) for c in ssd.system.connections}
     loose = [f"{comp.name}.{con.name}" for comp in find_components(ssd.system) for con in comp.connectors
@@ -384,7 +374,7 @@ def run_ssp_libcosim(path: str | Path, stop_time: float, step: float, start_time
     from .libcosim import NANO, CosimRun
 
     path = Path(path)
-    n = _n_steps(start_time, stop_time, step)
+    n = step_count(start_time, stop_time, step)
     run = CosimRun.from_ssp(path, step, log_level, last_value=False)
     try:
         t0 = run.execution.status().current_time / NANO

@@ -7,6 +7,8 @@ valid position with zero velocity and acceleration.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..ik import Unreachable, make_ik
@@ -62,7 +64,7 @@ class IKSlave(BlockSlave):
         r = self.r
         try:
             q, qd, qdd = self.solver.solve(r[self.x], r[self.xd], r[self.xdd])
-            if not (np.all(np.isfinite(qd)) and np.all(np.isfinite(qdd))):
+            if not math.isfinite(qd.sum() + qdd.sum()):
                 raise Unreachable(f"singular configuration at {r[self.x].tolist()}")
         except (Unreachable, np.linalg.LinAlgError) as exc:
             if self.other["reachable"] or self.last is None:
@@ -72,14 +74,14 @@ class IKSlave(BlockSlave):
             qd = qdd = np.zeros(self.n)
         else:
             self.other["reachable"] = True
-            self.last = q.tolist()
+            self.last = q
         r[self.q], r[self.qd], r[self.qdd] = q, qd, qdd
 
     def step(self, t, h):
         return True
 
     def logic_state(self):
-        return {"last": self.last}
+        return {"last": None if self.last is None else list(map(float, self.last))}
 
     def set_logic_state(self, state):
-        self.last = state["last"]
+        self.last = None if state["last"] is None else np.array(state["last"])

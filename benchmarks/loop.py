@@ -6,10 +6,10 @@ Python loop without FMI, and libcosim on the SSP export of the same diagram.
 Runners (each in a fresh child process, one after the other):
 
 - ``robofmu``: ``Master(system).run(stop, h)`` (Gauss-Seidel), every output recorded;
-- ``in-process``: :func:`inprocess_loop`, the FMI-free logic (WaypointTrajectory.evaluate and
-  grip, make_ik(robot).solve, ComputedTorque.torque/advance, Plant.step) called in the master's
-  evaluation order with the master's exchange, the same outputs recorded into a preallocated
-  array: it must reproduce the master to rounding (the correctness lines);
+- ``in-process``: :func:`robofmu.system.convergence.sampled_loop`, the FMI-free logic
+  (WaypointTrajectory.evaluate and grip, make_ik(robot).solve, ComputedTorque.torque/advance,
+  Plant.step) called in the master's order, the same outputs recorded into a preallocated
+  array: it must reproduce the master exactly (the correctness lines);
 - ``libcosim``: :func:`robofmu.system.ssp.run_ssp_libcosim` on ``export_ssp(system)``
   (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
   observer, Booleans cannot be).
@@ -56,109 +56,6 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0     # Linux: KiB
 
 
-# -- the same blocks without FMI --------------------------------------------------------------------
-def inprocess_loop(system, stop_time: float, h: float):
-    """Run the chess loop of ``system`` (a chess-loop experiment) without FMI.
-
-    The blocks are evaluated in the master's Gauss-Seidel order (trajectory, ik, plant,
-    controller: the plant's outputs depend on no input, so the master places it before the
-    controller, which reads q and qd); the plant's torque input, produced by a block evaluated
-    after it, is set once the pass is over, so tau(t) drives the plant's step from t to t + h;
-    then every block steps.
-
-    Returns (times, columns, data, loop wall time in s) with the master's columns (Real outputs
-    in evaluation order, then Booleans).
-    """
-    from robofmu.components.control import ComputedTorque
-    from robofmu.components.fmi.plant import scenario_start
-    from robofmu.components.ik import Unreachable, make_ik
-    from robofmu.components.plant import Plant
-    from robofmu.components.robot import Robot, load_spec
-    from robofmu.components.trajectory import WaypointTrajectory
-
-    spec = load_spec(system.extra.get("robot", "chess"))
-    s = spec.scenario
-    params = {b.name: dict(b.parameters) for b in system.blocks}
-    tp, ip, cp, pp = (params.get(n, {}) for n in ("trajectory", "ik", "controller", "plant"))
-    gains = spec.gains("pd")
-
-    traj = WaypointTrajectory(s["waypoints"], s["durations"], tp.get("pause", s["pause"]),
-                              tp.get("cruise_factor", s["cruise_factor"]),
-                              tp.get("grip_close_after_move", s["grip_close_after_move"]),
-                              tp.get("grip_open_after_move", s["grip_open_after_move"]))
-    ik_robot = Robot(spec)
-    ik = make_ik(ik_robot, tool_pitch=ip.get("tool_pitch", spec.raw["tool_pitch"]),
-                 elbow=ip.get("elbow", spec.raw.get("elbow", "up")))
-    c_robot = Robot(spec)
-    c_robot.set_gravity(cp.get("g", spec.gravity))
-    law = ComputedTorque(c_robot, cp.get("kp", gains["kp"]), cp.get("kd", gains["kd"]), cp.get("ki", gains["ki"]))
-    c_payload = float(cp.get("payload_mass", 0.0))
-    p_robot = Robot(spec)
-    p_robot.set_gravity(pp.get("g", spec.gravity))
-    n = p_robot.n
-    plant = Plant(p_robot, pp.get("q0", scenario_start(p_robot)), pp.get("qd0", np.zeros(n)),
-                  payload_mass=pp.get("payload_mass", spec.payload_mass),
-                  max_substep=pp.get("max_substep", 1e-3))
-
-    m = traj.dim
-    columns = ([f"trajectory.{b}[{i}]" for b in ("x_ref", "xd_ref", "xdd_ref") for i in range(1, m + 1)]
-               + [f"ik.{b}[{i}]" for b in ("q_ref", "qd_ref", "qdd_ref") for i in range(1, n + 1)]
-               + [f"plant.{b}[{i}]" for b in ("q", "qd") for i in range(1, n + 1)]
-               + [f"controller.tau[{i}]" for i in range(1, n + 1)]
-               + ["trajectory.grip", "ik.reachable"])
-    n_steps = int(round(stop_time / h))
-    times = h * np.arange(n_steps + 1)                # the master's communication points
-    rec = np.empty((n_steps + 1, len(columns)))
-    sx, sxd, sxdd = slice(0, m), slice(m, 2 * m), slice(2 * m, 3 * m)
-    o = 3 * m
-    sq_ref, sqd_ref, sqdd_ref = slice(o, o + n), slice(o + n, o + 2 * n), slice(o + 2 * n, o + 3 * n)
-    o += 3 * n
-    sq, sqd, stau = slice(o, o + n), slice(o + n, o + 2 * n), slice(o + 2 * n, o + 3 * n)
-    k_grip, k_reach = len(columns) - 2, len(columns) - 1
-
-    x, xd, xdd = traj.evaluate(times[0])
-    grip = traj.grip(times[0])
-    last_q = ik.position(np.asarray(s["waypoints"][0], dtype=float))   # the IK block's start values
-    tau_in = np.zeros(n)                                                  # plant.tau start values
-    tau = np.zeros(n)
-    plant.set_grip(False)
-    wall = time.perf_counter()
-    for k in range(n_steps + 1):
-        t = times[k]
-        row = rec[k]
-        # trajectory: outputs at t (computed by the previous step)
-        row[sx], row[sxd], row[sxdd] = x, xd, xdd
-        # ik: feedthrough from x, xd, xdd at t
-        try:
-            q_ref, qd_ref, qdd_ref = ik.solve(x, xd, xdd)
-            reachable = True
-            last_q = q_ref
-        except Unreachable:
-            q_ref, qd_ref, qdd_ref, reachable = last_q, np.zeros(n), np.zeros(n), False
-        row[sq_ref], row[sqd_ref], row[sqdd_ref] = q_ref, qd_ref, qdd_ref
-        # plant: outputs its state
-        q, qd = plant.q.copy(), plant.qd.copy()
-        row[sq], row[sqd] = q, qd
-        # controller: feedthrough from the reference, q, qd and grip at t
-        c_robot.set_payload(c_payload if grip else 0.0)
-        tau = law.torque(q_ref, qd_ref, qdd_ref, q, qd)
-        tau_in = tau                       # the plant's input from a later block: set after the pass
-        row[stau] = tau
-        row[k_grip], row[k_reach] = grip, reachable
-        if k == n_steps:
-            break
-        # every block steps from t to t + h
-        t_next = t + h
-        grip_in = grip
-        x, xd, xdd = traj.evaluate(t_next)
-        grip = traj.grip(t_next)
-        plant.set_grip(grip_in)
-        plant.step(tau_in, h, t)
-        law.advance(q_ref, q, h)
-    wall = time.perf_counter() - wall
-    return times, columns, rec, wall
-
-
 # -- one runner in this (child) process ------------------------------------------------------------------
 def child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None, out: Path) -> dict:
     import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
@@ -176,7 +73,12 @@ def child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None, 
         loop = result.info["wall_time"]
         times, columns, data = result.time, result.columns, result.data
     elif runner == "in-process":
-        times, columns, data, loop = inprocess_loop(system, stop, h)
+        from robofmu.system.convergence import sampled_loop
+        from robofmu.system.reference import LoopSetup
+
+        result = sampled_loop(LoopSetup.from_system(system), h, stop)
+        loop = result.info["wall_time"]
+        times, columns, data = result.time, result.columns, result.data
     elif runner == "libcosim":
         from robofmu.system.ssp import run_ssp_libcosim
 

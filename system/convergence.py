@@ -111,11 +111,14 @@ def run_cosim(system: System, step: float, algorithm: str, stop_time: float) -> 
 
 
 def sampled_loop(setup: LoopSetup, step: float, stop_time: float) -> Result:
-    """The sampled closed loop in-process (no FMUs), with the blocks' own logic.
+    """The Gauss-Seidel loop in one Python process: the blocks' logic without FMI.
 
-    At each t_k = k h: trajectory and grip at t_k, IK, controller torque from the state at t_k
-    (model payload while grip), integral z += e(t_k) h, then the plant (payload while grip)
-    integrated over [t_k, t_k + h] by RK4 (sub-steps <= ``setup.max_substep``) with tau(t_k) held.
+    At each t_k = k h the trajectory's outputs at t_k (computed at the end of the previous step,
+    as the FMU does), the IK, the plant's state and the controller's torque (model payload while
+    grip) are recorded; then the integral advances (z += e(t_k) h) and the plant (payload while
+    grip) is integrated over [t_k, t_k + h] by RK4 (sub-steps <= ``setup.max_substep``) with
+    tau(t_k) held. This is what the master does with the FMUs, call for call, so the two agree
+    to the last bit (``benchmarks/loop.py`` checks it and times both).
 
     Parameters
     ----------
@@ -128,14 +131,15 @@ def sampled_loop(setup: LoopSetup, step: float, stop_time: float) -> Result:
     Returns
     -------
     Result
-        Columns ``plant.q[i]`` (rad), ``plant.qd[i]`` (rad/s), ``controller.tau[i]`` (N.m, the
-        torque computed at t_k), ``trajectory.x_ref[i]`` (m); ``len(time)`` = steps + 1.
+        The master's columns, in its order: ``trajectory.x_ref[i]``, ``xd_ref``, ``xdd_ref`` (m,
+        m/s, m/s^2), ``ik.q_ref[j]``, ``qd_ref``, ``qdd_ref``, ``plant.q[j]``, ``plant.qd[j]``,
+        ``controller.tau[j]``, then ``trajectory.grip`` and ``ik.reachable`` (0/1);
+        ``info["wall_time"]`` is the stepping loop's wall time (s).
     """
     from robofmu.components.control import ComputedTorque
     from robofmu.components.ik import make_ik
     from robofmu.components.plant import Plant
 
-    wall = _time.perf_counter()
     h = float(step)
     n_steps = int(round(stop_time / h))
     trajectory = setup.trajectory()
@@ -146,24 +150,34 @@ def sampled_loop(setup: LoopSetup, step: float, stop_time: float) -> Result:
     if setup.z0 is not None:
         law.z[:] = setup.z0
     ik = make_ik(Robot(setup.robot), tool_pitch=setup.tool_pitch, elbow=setup.elbow)
-    n = plant.n
+    n, m = plant.n, trajectory.dim
+    columns = ([f"trajectory.{b}[{i}]" for b in ("x_ref", "xd_ref", "xdd_ref") for i in range(1, m + 1)]
+               + [f"ik.{b}[{j}]" for b in ("q_ref", "qd_ref", "qdd_ref") for j in range(1, n + 1)]
+               + [f"plant.{b}[{j}]" for b in ("q", "qd") for j in range(1, n + 1)]
+               + [f"controller.tau[{j}]" for j in range(1, n + 1)] + ["trajectory.grip", "ik.reachable"])
+    cuts = np.cumsum([0, m, m, m, n, n, n, n, n, n])
+    sx, sxd, sxdd, sq_ref, sqd_ref, sqdd_ref, sq, sqd, stau = (slice(a, b) for a, b in zip(cuts, cuts[1:]))
     times = h * np.arange(n_steps + 1)
-    data = np.empty((n_steps + 1, 3 * n + 3))
+    data = np.empty((n_steps + 1, len(columns)))
+    data[:, -1] = 1.0                                   # reachable: the solve below raises otherwise
+    x, xd, xdd = trajectory.evaluate(times[0])
+    wall = _time.perf_counter()
     for k, t in enumerate(times):
-        x, xd, xdd = trajectory.evaluate(t)
+        row = data[k]
         grip = trajectory.grip(t)
-        model.set_payload(setup.model_payload if grip else 0.0)
         q_ref, qd_ref, qdd_ref = ik.solve(x, xd, xdd)
+        model.set_payload(setup.model_payload if grip else 0.0)
         tau = law.torque(q_ref, qd_ref, qdd_ref, plant.q, plant.qd)
-        data[k] = np.concatenate([plant.q, plant.qd, tau, x])
+        row[sx], row[sxd], row[sxdd] = x, xd, xdd
+        row[sq_ref], row[sqd_ref], row[sqdd_ref] = q_ref, qd_ref, qdd_ref
+        row[sq], row[sqd], row[stau] = plant.q, plant.qd, tau
+        row[-2] = grip
         if k == n_steps:
             break
         law.advance(q_ref, plant.q, h)
         plant.set_grip(grip)
         plant.step(tau, h, t)
-    columns = ([f"plant.q[{i}]" for i in range(1, n + 1)] + [f"plant.qd[{i}]" for i in range(1, n + 1)]
-               + [f"controller.tau[{i}]" for i in range(1, n + 1)]
-               + [f"trajectory.x_ref[{i}]" for i in range(1, 4)])
+        x, xd, xdd = trajectory.evaluate(t + h)          # the trajectory FMU's outputs at t + h
     return Result(times, columns, data, {"algorithm": "replica", "step": h,
                                          "wall_time": _time.perf_counter() - wall})
 

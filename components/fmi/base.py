@@ -407,6 +407,8 @@ class BlockSlave(Fmi2Slave):
             index[var.name] = i
             if var.unit:
                 sv[0].set("unit", var.unit)
+            if var.kind == "Real" and sv[0].get("start") is not None:
+                sv[0].set("start", repr(float(self.r[var.vr])))   # pythonfmu's %.16g does not round-trip
 
         structure = root.find("ModelStructure")
         for child in list(structure):

@@ -116,12 +116,38 @@ class WaypointTrajectory:
         self._starts = np.array([s.start for s in segments])
         self.grip_close_time = self.move_ends[grip_close_after_move - 1] if grip_close_after_move else np.inf
         self.grip_open_time = self.move_ends[grip_open_after_move - 1] if grip_open_after_move else np.inf
+        moves = [s for s in segments if s.move]
+        blends = [(s.end - s.start) * (1.0 - 1.0 / self.cruise_factor) for s in moves]
+        self.breakpoints = np.unique(np.concatenate(
+            [self._starts, [self.duration], [s.start + b for s, b in zip(moves, blends)],
+             [s.end - b for s, b in zip(moves, blends)]]))
 
-    def evaluate(self, t: float):
+    @classmethod
+    def from_scenario(cls, scenario: dict) -> "WaypointTrajectory":
+        """The trajectory of a robot description's ``[scenario]`` table."""
+        return cls(scenario["waypoints"], scenario["durations"], scenario.get("pause", 0.0),
+                   scenario.get("cruise_factor", 1.5), scenario.get("grip_close_after_move", 0),
+                   scenario.get("grip_open_after_move", 0))
+
+    def _snap(self, t: float, tol: float = 1e-9) -> float:
+        """``t`` moved onto a breakpoint (segment boundary or blend switch) within ``tol`` s, so
+        that communication points that land on one by rounding (3.4995 + 5e-4) evaluate the same
+        branch as the exact instant."""
+        k = int(np.searchsorted(self.breakpoints, t))
+        for j in (k - 1, k):
+            if 0 <= j < len(self.breakpoints) and abs(self.breakpoints[j] - t) <= tol:
+                return float(self.breakpoints[j])
+        return t
+
+    def evaluate(self, t: float, snap: bool = True):
         """Reference position, velocity and acceleration at time ``t`` (s), each shape (m,).
 
-        Before 0 the trajectory rests at the first waypoint, after its end at the last.
+        Before 0 the trajectory rests at the first waypoint, after its end at the last. With
+        ``snap``, times within 1e-9 s of a breakpoint are evaluated at the breakpoint (sampled
+        use); without, the exact branch at ``t`` (an integrator working inside one piece).
         """
+        if snap:
+            t = self._snap(t)
         if t >= self.duration:
             return self.waypoints[-1].copy(), np.zeros(self.dim), np.zeros(self.dim)
         i = max(int(np.searchsorted(self._starts, t, side="right")) - 1, 0)
@@ -130,11 +156,12 @@ class WaypointTrajectory:
             return s.x0.copy(), np.zeros(self.dim), np.zeros(self.dim)
         return lspb(s.x0, s.x1, s.end - s.start, t - s.start, self.cruise_factor)
 
-    def grip(self, t: float, tol: float = 1e-9) -> bool:
+    def grip(self, t: float) -> bool:
         """Gripper closed at time ``t``? Closing and opening take effect at their instants
-        (within ``tol`` s, so that communication points that land on them by rounding count)."""
-        closed = t >= self.grip_close_time - tol
-        opened = t >= self.grip_open_time - tol and self.grip_open_time > self.grip_close_time
+        (within 1e-9 s, so that communication points that land on them by rounding count)."""
+        t = self._snap(t)
+        closed = t >= self.grip_close_time
+        opened = t >= self.grip_open_time and self.grip_open_time > self.grip_close_time
         return bool(closed and not opened)
 
 

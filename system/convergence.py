@@ -54,7 +54,7 @@ from robofmu.components.robot import Robot
 
 from .diagram import System
 from .experiment import load
-from .master import Master, Result
+from .master import ALGORITHMS, Master, Result, step_count
 from .reference import LoopSetup, MonolithicLoop
 
 __all__ = ["DEFAULT_STEPS", "ALGORITHMS", "errors", "observed_order", "run_cosim", "sampled_loop",
@@ -62,8 +62,6 @@ __all__ = ["DEFAULT_STEPS", "ALGORITHMS", "errors", "observed_order", "run_cosim
 
 #: Communication steps of the study (s).
 DEFAULT_STEPS = (0.01, 0.005, 0.002, 0.001, 0.0005)
-#: Master algorithms, plus "replica": the sampled loop in-process (see :func:`sampled_loop`).
-ALGORITHMS = ("gauss-seidel", "jacobi")
 
 
 def observed_order(steps: Sequence[float], errs: Sequence[float]) -> float:
@@ -147,8 +145,6 @@ def sampled_loop(setup: LoopSetup, step: float, stop_time: float) -> Result:
                   payload_mass=setup.payload, max_substep=setup.max_substep)
     model = Robot(setup.robot, gravity=setup.model_gravity)
     law = ComputedTorque(model, setup.kp, setup.kd, setup.ki)
-    if setup.z0 is not None:
-        law.z[:] = setup.z0
     ik = make_ik(Robot(setup.robot), tool_pitch=setup.tool_pitch, elbow=setup.elbow)
     n, m = plant.n, trajectory.dim
     columns = ([f"trajectory.{b}[{i}]" for b in ("x_ref", "xd_ref", "xdd_ref") for i in range(1, m + 1)]

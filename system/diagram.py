@@ -6,12 +6,71 @@ Python or read from a declarative experiment file (TOML) under ``system/experime
 """
 from __future__ import annotations
 
+import fnmatch
 import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+_INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
 _WIRE = re.compile(r"^\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*->\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*$")
+
+
+def expand(names, base: str) -> list[str]:
+    """The variables ``base`` names among ``names``: itself if it is one, else ``base[1]``,
+    ``base[2]``, ... in index order (FMI structured naming); [] if none."""
+    names = list(names)
+    if base in names:
+        return [base]
+    found = sorted((int(m.group(2)), n) for n in names if (m := _INDEXED.match(n)) and m.group(1) == base)
+    return [n for _, n in found]
+
+
+def select(columns: list[str], patterns: list[str] | None) -> list[int]:
+    """Indices of the ``columns`` (``instance.variable``) matching any fnmatch pattern; all if None."""
+    if patterns is None:
+        return list(range(len(columns)))
+    return [k for k, c in enumerate(columns) if any(fnmatch.fnmatchcase(c, p) for p in patterns)]
+
+
+def spread(names: list[str], value, what: str) -> list:
+    """One value per name: a sequence of ``len(names)`` values, or one scalar for one name."""
+    values = list(value) if isinstance(value, (list, tuple)) or hasattr(value, "__array__") else [value]
+    if len(values) != len(names):
+        raise ValueError(f"{what} has {len(names)} element{'s' * (len(names) != 1)}, got {len(values)} "
+                         f"value{'s' * (len(values) != 1)}")
+    return values
+
+
+def coerce(kind: str, value, what: str):
+    """``value`` as the Python value of an FMI ``kind`` (Real, Integer, Boolean, String), or
+    ValueError naming ``what``; a string is parsed as a model description's start attribute."""
+    try:
+        if kind == "Real":
+            if isinstance(value, bool):
+                raise TypeError
+            return float(value)
+        if kind in ("Integer", "Enumeration"):
+            if isinstance(value, (bool, float)) and not float(value).is_integer():
+                raise TypeError
+            return int(value)
+        if kind == "Boolean":
+            if isinstance(value, str):
+                if value.strip().lower() not in ("true", "false", "1", "0"):
+                    raise TypeError
+                return value.strip().lower() in ("true", "1")
+            if value not in (True, False, 0, 1):
+                raise TypeError
+            return bool(value)
+        if kind == "String":
+            if not isinstance(value, str):
+                raise TypeError
+            return value
+    except (TypeError, ValueError):
+        pass
+    else:
+        raise ValueError(f"{what}: unsupported type {kind}")
+    raise ValueError(f"{what} is a {kind}, got {value!r}")
 
 
 @dataclass

@@ -8,7 +8,6 @@ FMU's last error messages when a call fails.
 from __future__ import annotations
 
 import ctypes
-import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy import calloc, free
+
+from .diagram import coerce, expand, spread
 
 STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
@@ -50,8 +51,6 @@ class FMUError(RuntimeError):
         self.call = call
         self.logged = logged
 
-
-_INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
 
 # fmpy's native logger proxy (it formats the variadic message) remembers one Python logger for
 # the whole process, whichever instance registered last. So every Block registers the same
@@ -113,16 +112,20 @@ class Block:
         self.variables = {v.name: v for v in self.md.modelVariables}
         self.messages: list[LogMessage] = []
         self._echo = echo
+        self._alive = False
         self._unzipdir = extract(str(self.path))
         self._callbacks = _callbacks_for(self)
-        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
-                               modelIdentifier=self.md.coSimulation.modelIdentifier,
-                               instanceName=name)
         try:
+            self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
+                                   modelIdentifier=self.md.coSimulation.modelIdentifier,
+                                   instanceName=name)
             self.slave.instantiate(callbacks=self._callbacks, loggingOn=True)
-        except Exception:
-            self.slave.freeLibrary()
-            raise FMUError(self, "fmi2Instantiate") from None
+        except Exception as exc:
+            if hasattr(self, "slave"):
+                self.slave.freeLibrary()
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            _ROUTES.pop(self._route, None)
+            raise FMUError(self, "fmi2Instantiate", "" if self.messages else str(exc)) from None
         self._alive = True
 
     def _log(self, env, instance, status, category, message):
@@ -143,16 +146,10 @@ class Block:
 
     def names(self, base: str) -> list[str]:
         """``base`` itself if it is a variable, else ``base[1]``, ``base[2]``, ... in order."""
-        if base in self.variables:
-            return [base]
-        found = []
-        for name in self.variables:
-            m = _INDEXED.match(name)
-            if m and m.group(1) == base:
-                found.append((int(m.group(2)), name))
+        found = expand(self.variables, base)
         if not found:
             raise KeyError(f"{self.name}: no variable {base!r} (nor {base}[i]) in {self.path.name}")
-        return [n for _, n in sorted(found)]
+        return found
 
     def vrs(self, *bases: str) -> list[int]:
         """Value references of the variables named by ``bases`` (each a name or a vector base)."""
@@ -179,20 +176,17 @@ class Block:
     def set(self, name: str, value) -> None:
         """Set one variable (any type) or a whole vector (``q0`` = [..]) by name."""
         names = self.names(name)
-        values = list(value) if len(names) > 1 or isinstance(value, (list, tuple)) else [value]
-        if len(values) != len(names):
-            raise ValueError(f"{self.name}: {name} has {len(names)} elements, got {len(values)} values")
-        for n, v in zip(names, values):
+        for n, v in zip(names, spread(names, value, f"{self.name}.{name}")):
             var = self.variable(n)
-            vr = [var.valueReference]
+            vr, v = [var.valueReference], coerce(var.type, v, f"{self.name}.{n}")
             if var.type == "Real":
-                self._call(f"fmi2SetReal({n})", self.slave.setReal, vr, [float(v)])
+                self._call(f"fmi2SetReal({n})", self.slave.setReal, vr, [v])
             elif var.type == "Boolean":
-                self._call(f"fmi2SetBoolean({n})", self.slave.setBoolean, vr, [bool(v)])
+                self._call(f"fmi2SetBoolean({n})", self.slave.setBoolean, vr, [v])
             elif var.type in ("Integer", "Enumeration"):
-                self._call(f"fmi2SetInteger({n})", self.slave.setInteger, vr, [int(v)])
+                self._call(f"fmi2SetInteger({n})", self.slave.setInteger, vr, [v])
             else:
-                self._call(f"fmi2SetString({n})", self.slave.setString, vr, [str(v)])
+                self._call(f"fmi2SetString({n})", self.slave.setString, vr, [v])
 
     def get(self, name: str):
         """Value of one variable, or list of values of a vector base."""

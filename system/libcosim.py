@@ -21,11 +21,11 @@ included) is written to the C++ stdout.
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
-_INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
+from .diagram import expand, spread
+
 NANO = 1_000_000_000
 
 
@@ -168,14 +168,10 @@ class CosimRun:
 
     def names(self, instance: str, base: str) -> list[str]:
         """``base`` itself if it is a variable of ``instance``, else ``base[1]``, ``base[2]``, ..."""
-        variables = self._slave(instance).variables
-        if base in variables:
-            return [base]
-        found = sorted((int(m.group(2)), n) for n in variables
-                       if (m := _INDEXED.match(n)) and m.group(1) == base)
+        found = expand(self._slave(instance).variables, base)
         if not found:
             raise KeyError(f"{instance}: no variable {base!r} (nor {base}[i])")
-        return [n for _, n in found]
+        return found
 
     def variables(self, instance: str, base: str) -> list[CosimVariable]:
         slave = self._slave(instance)
@@ -185,13 +181,6 @@ class CosimRun:
         return [v.reference for v in self.variables(instance, base)]
 
     # -- values ---------------------------------------------------------------------------------
-    @staticmethod
-    def _spread(variables, value) -> list:
-        values = list(value) if isinstance(value, (list, tuple)) or hasattr(value, "__array__") else [value]
-        if len(values) != len(variables):
-            raise ValueError(f"{variables[0].name}: {len(variables)} elements, got {len(values)} values")
-        return values
-
     def set_initial(self, instance: str, name: str, value) -> None:
         """Initial (start) value of a parameter or input, or of every element of a vector base.
 
@@ -202,7 +191,7 @@ class CosimRun:
         ex = self.execution
         setters = {"REAL": (ex.real_initial_value, float), "INTEGER": (ex.integer_initial_value, int),
                    "BOOLEAN": (ex.boolean_initial_value, bool), "STRING": (ex.string_initial_value, str)}
-        for var, v in zip(variables, self._spread(variables, value)):
+        for var, v in zip(variables, spread(variables, value, f"{instance}.{name}")):
             setter, cast = setters[var.type]
             self._check(setter(index, var.reference, cast(v)), f"initial value {instance}.{var.name} = {v!r}")
 
@@ -215,7 +204,7 @@ class CosimRun:
         bad = [v.name for v in variables if v.type != "REAL"]
         if bad:
             raise TypeError(f"{instance}: override supports Real variables only, not {bad}")
-        values = [float(v) for v in self._spread(variables, value)]
+        values = [float(v) for v in spread(variables, value, f"{instance}.{name}")]
         self._check(self.manipulator.slave_real_values(self.index(instance), [v.reference for v in variables],
                                                        values),
                     f"override {instance}.{name}")

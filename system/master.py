@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import csv
 import ctypes
-import fnmatch
 import math
 import time as _time
 from dataclasses import dataclass, field
@@ -26,8 +25,8 @@ import numpy as np
 from fmpy import read_model_description
 from fmpy.fmi2 import fmi2True
 
-from .diagram import System, Wire
-from .fmu import Block, FMUError, LogMessage
+from .diagram import System, coerce, expand, select, spread
+from .fmu import STATUS, Block, FMUError, LogMessage
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 
@@ -181,23 +180,26 @@ class Master:
             self.nodes[spec.name] = node
 
         def names(node: _Node, base: str) -> list[str]:
-            if base in node.variables:
-                return [base]
-            found = sorted((int(n[len(base) + 1:-1]), n) for n in node.variables
-                           if n.startswith(base + "[") and n.endswith("]") and n[len(base) + 1:-1].isdigit())
-            return [n for _, n in found]
+            return expand(node.variables, base)
 
         for spec in s.blocks:
             node = self.nodes.get(spec.name)
             if node is None:
                 continue
-            for pname in spec.parameters:
+            for pname, value in spec.parameters.items():
                 vs = names(node, pname)
                 if not vs:
                     problems.append(f"block {spec.name!r}: unknown parameter {pname!r} in {node.path.name}")
-                elif any(node.variables[v].causality not in ("parameter", "input") for v in vs):
+                    continue
+                if any(node.variables[v].causality not in ("parameter", "input") for v in vs):
                     problems.append(f"block {spec.name!r}: {pname!r} is a {node.variables[vs[0]].causality}, "
                                     "not a parameter")
+                    continue
+                try:
+                    for v, x in zip(vs, spread(vs, value, f"{spec.name}.{pname}")):
+                        coerce(node.variables[v].type, x, f"{spec.name}.{v}")
+                except ValueError as exc:
+                    problems.append(f"block {spec.name!r}: parameter {exc}")
 
         self.links: list[tuple[str, str, str, str]] = []   # src, out, dst, in (scalar names)
         driven: dict[tuple[str, str], str] = {}
@@ -287,6 +289,11 @@ class Master:
         order, done = [], set()
         while len(order) < len(names):
             ready = [n for n in names if n not in done and after[n] <= done]
+            if not ready:
+                stuck = [n for n in names if n not in done]
+                raise DiagramError(self.system.name, [
+                    "blocks feed each other's feedthrough inputs in a cycle and cannot be ordered: "
+                    + ", ".join(stuck)])
             order.append(ready[0])
             done.add(ready[0])
         return order
@@ -361,10 +368,7 @@ class Master:
         self.real_names = [f"{b}.{n}" for b, n, _ in real_out]
         self.bool_names = [f"{b}.{n}" for b, n, _ in bool_out]
         columns = self.real_names + self.bool_names
-        if self.record is None:
-            keep = list(range(len(columns)))
-        else:
-            keep = [k for k, c in enumerate(columns) if any(fnmatch.fnmatchcase(c, p) for p in self.record)]
+        keep = select(columns, self.record)
         self.columns = [columns[k] for k in keep]
         self.keep = np.array(keep, dtype=np.intp)
 
@@ -494,11 +498,8 @@ class _Failure(Exception):
         self.call = call
 
 
-_STATUS = ["ok", "warning", "discard", "error", "fatal", "pending"]
-
-
 def _status(status: int) -> str:
-    return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+    return STATUS[status].lower() if 0 <= status < len(STATUS) else str(status)
 
 
 def _get(f, c, port: _Port, name: str, call: str):

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 import time as _time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -52,7 +52,7 @@ from robofmu.components.trajectory import (WaypointTrajectory, format_matrix, fo
 from .diagram import System
 from .master import Result
 
-__all__ = ["LoopSetup", "MonolithicLoop", "monolithic", "reference_run", "discontinuities"]
+__all__ = ["LoopSetup", "MonolithicLoop", "reference_run", "discontinuities"]
 
 #: Offset (s) by which the trajectory is evaluated inside a piece when the integrator asks for
 #: the piece's very ends, so that the branch of the piece is used there (a piece's right-hand
@@ -84,9 +84,6 @@ class LoopSetup:
         Point mass (kg) the true arm carries at the TCP while the gripper is closed.
     q0, qd0 : ndarray, shape (n,)
         Initial joint positions (rad or m) and velocities (rad/s or m/s).
-    z0 : ndarray, shape (n,), optional
-        Initial integral of the joint error (rad.s or m.s); None (default) for zero, as in every
-        experiment.
     max_substep : float
         The plant block's largest RK4 sub-step (s). Not used by the monolithic reference (which
         is integrated adaptively); kept for in-process replicas of the sampled loop.
@@ -124,7 +121,6 @@ class LoopSetup:
     grip_open_after_move: int = 0
     tool_pitch: float | None = None
     elbow: str | None = None
-    z0: np.ndarray | None = field(default=None)
     max_substep: float = 1e-3
 
     # -- constructors --------------------------------------------------------------------------
@@ -266,14 +262,8 @@ def discontinuities(trajectory: WaypointTrajectory, t_end: float) -> np.ndarray:
     ndarray, shape (m,)
         Times (s).
     """
-    times = [trajectory.duration, trajectory.grip_close_time, trajectory.grip_open_time]
-    for s in trajectory.segments:
-        times += [s.start, s.end]
-        if s.move:
-            T = s.end - s.start
-            tb = T - T / trajectory.cruise_factor
-            times += [s.start + tb, s.end - tb]
-    times = np.unique(np.array([t for t in times if math.isfinite(t) and 0.0 < t < t_end]))
+    times = trajectory.breakpoints          # segment bounds (gripper events among them), blend switches
+    times = times[(times > 0.0) & (times < t_end)]
     # merge instants closer than rounding (e.g. a blend switch equal to a segment end)
     if times.size:
         keep = np.concatenate([[True], np.diff(times) > 1e-9])
@@ -314,27 +304,15 @@ class MonolithicLoop:
         self.stats = {"nfev": 0, "pieces": 0, "wall_time": 0.0}
 
     # -- pieces of the right-hand side ----------------------------------------------------------
-    def references(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Joint reference (q_ref, qd_ref, qdd_ref) at ``t`` (s), each shape (n,)."""
-        x, xd, xdd = self.trajectory.evaluate(t)
+    def references(self, t: float, snap: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Joint reference (q_ref, qd_ref, qdd_ref) at ``t`` (s), each shape (n,); ``snap`` as in
+        :meth:`WaypointTrajectory.evaluate`."""
+        x, xd, xdd = self.trajectory.evaluate(t, snap)
         return self.ik.solve(x, xd, xdd)
 
     def _payloads(self, grip: bool) -> None:
         self.plant.set_payload(self.setup.payload if grip else 0.0)
         self.model.set_payload(self.setup.model_payload if grip else 0.0)
-
-    def torque(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray,
-               grip: bool | None = None, t_ref: float | None = None) -> np.ndarray:
-        """Controller output (N.m or N), shape (n,), at time ``t`` for the state (q, qd, z).
-
-        ``grip`` defaults to the trajectory's at ``t``; ``t_ref`` (default ``t``) is where the
-        trajectory is read.
-        """
-        grip = self.trajectory.grip(t) if grip is None else grip
-        self._payloads(grip)
-        q_ref, qd_ref, qdd_ref = self.references(t if t_ref is None else t_ref)
-        self.law.z[:] = z
-        return self.law.torque(q_ref, qd_ref, qdd_ref, q, qd)
 
     def rhs(self, t: float, x: np.ndarray, lo: float, hi: float, grip: bool) -> np.ndarray:
         """x' on the piece [lo, hi] where the gripper state is ``grip``; shape (3n,)."""
@@ -342,7 +320,7 @@ class MonolithicLoop:
         q, qd, z = x[:n], x[n:2 * n], x[2 * n:]
         t_ref = min(max(t, lo + _INSIDE), hi - _INSIDE)
         self._payloads(grip)
-        q_ref, qd_ref, qdd_ref = self.references(t_ref)
+        q_ref, qd_ref, qdd_ref = self.references(t_ref, snap=False)
         self.law.z[:] = z
         tau = self.law.torque(q_ref, qd_ref, qdd_ref, q, qd)
         qdd = self.plant.forward_dynamics(q, qd, tau)
@@ -361,12 +339,11 @@ class MonolithicLoop:
             raise ValueError(f"t_end: must be > 0 s, got {t_end}")
         wall = _time.perf_counter()
         s = self.setup
-        z0 = np.zeros(self.n) if s.z0 is None else np.asarray(s.z0, float)
-        x = np.concatenate([np.asarray(s.q0, float), np.asarray(s.qd0, float), z0])
+        x = np.concatenate([np.asarray(s.q0, float), np.asarray(s.qd0, float), np.zeros(self.n)])
         bounds = np.concatenate([[0.0], discontinuities(self.trajectory, t_end), [t_end]])
         self.pieces, nfev = [], 0
         for lo, hi in zip(bounds[:-1], bounds[1:]):
-            grip = self.trajectory.grip(0.5 * (lo + hi), tol=0.0)
+            grip = self.trajectory.grip(0.5 * (lo + hi))
             sol = solve_ivp(self.rhs, (lo, hi), x, method="DOP853", rtol=self.rtol, atol=self.atol,
                             dense_output=True, args=(lo, hi, grip))
             if not sol.success:
@@ -460,35 +437,6 @@ class MonolithicLoop:
 # ------------------------------------------------------------------------------------------------
 # one-call API
 # ------------------------------------------------------------------------------------------------
-def monolithic(setup: LoopSetup | System, times, rtol: float = 1e-10, atol: float = 1e-12):
-    """Joint trajectory of the continuous closed loop at ``times``.
-
-    Parameters
-    ----------
-    setup : LoopSetup or System
-        The loop (a System is read with :meth:`LoopSetup.from_system`).
-    times : array_like, shape (m,)
-        Output times (s), >= 0; the loop is integrated from 0 to ``max(times)``.
-    rtol, atol : float
-        DOP853 tolerances.
-
-    Returns
-    -------
-    q : ndarray, shape (m, n)
-        Joint positions (rad).
-    qd : ndarray, shape (m, n)
-        Joint velocities (rad/s).
-    tau : ndarray, shape (m, n)
-        Controller torques (N.m) at the same instants.
-    """
-    if isinstance(setup, System):
-        setup = LoopSetup.from_system(setup)
-    times = np.atleast_1d(np.asarray(times, dtype=float))
-    loop = MonolithicLoop(setup, rtol, atol).solve(float(times.max()))
-    e = loop.evaluate(times)
-    return e["q"], e["qd"], e["tau"]
-
-
 def reference_run(system: System | LoopSetup, times=None, rtol: float = 1e-10,
                   atol: float = 1e-12) -> Result:
     """The monolithic reference of an experiment, recorded like a co-simulation run.

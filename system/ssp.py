@@ -74,7 +74,6 @@ libcosim (``CosimExecution.from_ssp_file`` -> ``cosim_ssp_fixed_step_execution_c
 """
 from __future__ import annotations
 
-import fnmatch
 import math
 import time as _time
 import zipfile
@@ -83,7 +82,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from .diagram import System
+from .diagram import System, coerce, expand, select, spread
 from .master import Master, Result, _unit, step_count
 
 NS = {
@@ -115,37 +114,21 @@ def _fmt_real(value: float) -> str:
     return repr(value)
 
 
-def _scalar_names(variables: dict, base: str) -> list[str]:
-    if base in variables:
-        return [base]
-    found = sorted((int(n[len(base) + 1:-1]), n) for n in variables
-                   if n.startswith(base + "[") and n.endswith("]") and n[len(base) + 1:-1].isdigit())
-    return [n for _, n in found]
-
-
 def _parameter_values(block: str, variables: dict, parameters: dict) -> list[tuple[str, str, str]]:
     """(scalar name, SSV type, value text) of a block's parameters, vector bases expanded."""
     out = []
     for base, value in parameters.items():
-        names = _scalar_names(variables, base)
+        names = expand(variables, base)
         if not names:
             raise ValueError(f"block {block!r}: unknown parameter {base!r}")
-        values = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
-        if len(values) != len(names):
-            raise ValueError(f"block {block!r}: {base} has {len(names)} elements, got {len(values)} values")
-        for name, v in zip(names, values):
+        for name, v in zip(names, spread(names, value, f"block {block!r}: {base}")):
             kind = variables[name].type
-            if kind == "Real":
-                out.append((name, "Real", _fmt_real(v)))
-            elif kind == "Integer":
-                out.append((name, "Integer", str(int(v))))
-            elif kind == "Boolean":
-                out.append((name, "Boolean", "true" if bool(v) else "false"))
-            elif kind == "String":
-                out.append((name, "String", str(v)))
-            else:
+            if kind not in ("Real", "Integer", "Boolean", "String"):
                 raise ValueError(f"block {block!r}: parameter {name} has type {kind}, which this export "
                                  "does not support (libcosim cannot take SSP enumerations either)")
+            v = coerce(kind, v, f"block {block!r}: {name}")
+            text = _fmt_real(v) if kind == "Real" else str(v).lower() if kind == "Boolean" else str(v)
+            out.append((name, kind, text))
     return out
 
 
@@ -284,12 +267,6 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
 
 
 # -- running ------------------------------------------------------------------------------------
-def _selected(columns: list[str], record: list[str] | None) -> list[int]:
-    if record is None:
-        return list(range(len(columns)))
-    return [k for k, c in enumerate(columns) if any(fnmatch.fnmatchcase(c, p) for p in record)]
-
-
 def _fmpy_parameter_set(ssd):
     """The parameter bindings of every component, as one fmpy ParameterSet with typed values."""
     from fmpy.ssp.ssd import Parameter, ParameterSet, find_components
@@ -355,7 +332,7 @@ def run_ssp_fmpy(path: str | Path, stop_time: float, step: float, start_time: fl
     if len(rows) != n:
         raise RuntimeError(f"fmpy.ssp made {len(rows)} steps, expected {n}")
     names = [c for c in rows.dtype.names[1:] if c in outputs]
-    keep = [names[k] for k in _selected(names, record)]
+    keep = [names[k] for k in select(names, record)]
     data = np.column_stack([rows[c].astype(float) for c in keep]) if keep else np.zeros((n, 0))
     return Result(start_time + step * np.arange(1, n + 1), keep, data,
                   {"tool": "fmpy.ssp", "algorithm": "jacobi (no initial exchange)", "step": step,
@@ -384,7 +361,7 @@ def run_ssp_libcosim(path: str | Path, stop_time: float, step: float, start_time
                       if v.causality == "OUTPUT" and v.type == "REAL"]
         candidates.sort(key=lambda c: (run.slaves[c[0]].index, run.slaves[c[0]].variables[c[1]].reference))
         columns = [f"{i}.{v}" for i, v in candidates]
-        keep = [candidates[k] for k in _selected(columns, record)]
+        keep = [candidates[k] for k in select(columns, record)]
         for inst, name in keep:
             run.observe_series(inst, name, buffer_size=n + 1)
         wall = _time.perf_counter()

@@ -141,3 +141,23 @@ def test_bundled_code_mismatch_fails_loudly(fmu_dir, tmp_path):
 def test_missing_fmu_is_named(tmp_path):
     with pytest.raises(FileNotFoundError, match="plant: FMU .*nope.fmu does not exist"):
         Block(tmp_path / "nope.fmu", "plant")
+
+
+def test_target_unreachable_from_the_start_warns_once(fmu_dir):
+    ik = open_block(fmu_dir, "ik", parameters={"x_ref": [0.9, 0.0, 0.1]})
+    for k in range(5):
+        assert ik.get("reachable") is False and ik.get("q_ref") == [0.0] * 4
+        ik.do_step(k * 0.01, 0.01)
+    warnings = [m.message for m in ik.messages if m.status == "WARNING"]
+    assert len(warnings) == 1 and "no valid solution yet: outputs zero" in warnings[0]
+    ik.close()
+
+
+@pytest.mark.parametrize("block, name, value", [("controller", "kp", 1e6), ("plant", "q0[1]", 0.5),
+                                                 ("ik", "elbow", "down")])
+def test_parameters_are_fixed_once_initialized(fmu_dir, block, name, value):
+    b = open_block(fmu_dir, block)
+    with pytest.raises(FMUError) as info:
+        b.set(name, value)
+    assert "parameters are fixed once initialized" in str(info.value) and name in str(info.value)
+    b.close()

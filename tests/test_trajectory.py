@@ -77,6 +77,18 @@ def test_second_move_numbers(gambit):
     np.testing.assert_allclose(xd, 1.5 * np.array([-0.24, 0.18, 0.0]) / 3.0, atol=1e-15)
 
 
+def test_breakpoints_reached_by_rounding_evaluate_as_the_exact_instant(gambit):
+    # move 2 runs 1.5 .. 4.5 s with blends of 1 s: 3.5 s is the start of its deceleration
+    h = 5e-4
+    t = h * 6999 + h                           # a master's t_k + h: 3.5000000000000004
+    assert t != 3.5
+    for a, b in zip(gambit.evaluate(t), gambit.evaluate(3.5)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(gambit.evaluate(3.5)[2], 0.0)               # still cruising
+    assert gambit.evaluate(3.5 + 1e-6)[2][0] > 0.0                             # decelerating
+    assert 3.5 in gambit.breakpoints and 2.5 in gambit.breakpoints and 13.0 in gambit.breakpoints
+
+
 def test_grip_signal(gambit):
     assert not gambit.grip(5.999)
     assert gambit.grip(6.0) and gambit.grip(6.0 - 1e-12)    # communication points land by rounding

@@ -19,7 +19,7 @@ import ctypes
 import math
 import sys
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement
 
 import numpy as np
@@ -29,6 +29,7 @@ from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variabil
 
 from .. import SOURCE_HASH, check_bundle
 from ..robot import load_spec
+from ..trajectory import WaypointTrajectory
 
 #: SI base-unit exponents of every unit a block may use (FMI 2.0 UnitDefinitions).
 UNITS = {
@@ -43,11 +44,13 @@ UNITS = {
     "kg": {"kg": 1},
     "N": {"kg": 1, "m": 1, "s": -2},
     "N.m": {"kg": 1, "m": 2, "s": -2},
-    "m/s2/m": {"s": -2},          # kp
     "1/s2": {"s": -2},
     "1/s": {"s": -1},
     "1/s3": {"s": -3},
 }
+
+#: A coordinate's unit -> the units of it and its first two time derivatives.
+DERIVATIVE_UNITS = {"m": ("m", "m/s", "m/s2"), "rad": ("rad", "rad/s", "rad/s2")}
 
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
 _VARIABILITY = {v.name: v for v in Fmi2Variability}
@@ -66,7 +69,6 @@ class Var:
     depends: list[str] | None = None   # outputs: the inputs they depend on (None: not declared)
     initial_depends: list[str] | None = None  # outputs: knowns they depend on at initialization
     description: str = ""
-    extra: dict = field(default_factory=dict)
 
 
 def _balance_pythonfmu_refcount(cls) -> None:
@@ -100,10 +102,7 @@ class BlockSlave(Fmi2Slave):
         self.author = "robofmu"
         self.version = f"0.1.0+{SOURCE_HASH[:12]}"
         self.description = f"robofmu {self.block} block of robot '{self.robot_name}': {self.summary}"
-        scenario_end = None
-        if self.spec.scenario:
-            s = self.spec.scenario
-            scenario_end = sum(s["durations"]) + s["pause"] * (len(s["durations"]) - 1)
+        scenario_end = WaypointTrajectory.from_scenario(self.spec.scenario).duration if self.spec.scenario else None
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=scenario_end, step_size=1e-3)
         self.meta: dict[str, Var] = {}
         self._starts: list[float] = []
@@ -120,6 +119,7 @@ class BlockSlave(Fmi2Slave):
         kinds = np.array(self._kinds)
         caus = np.array(self._causalities)
         self._settable_real = (kinds == "Real") & ((caus == "input") | (caus == "parameter"))
+        self._input_real = (kinds == "Real") & (caus == "input")     # settable once initialized
         self._real = kinds == "Real"
         self._input_vrs = np.flatnonzero((kinds == "Real") & (caus == "input"))
         self._input_mask = ((kinds == "Real") & (caus == "input")).astype(float)
@@ -144,8 +144,7 @@ class BlockSlave(Fmi2Slave):
         return vr
 
     def real(self, name: str, causality: str, unit: str, description: str, start: float = 0.0,
-             depends: list[str] | None = None, initial_depends: list[str] | None = None,
-             variability: str | None = None) -> int:
+             depends: list[str] | None = None, initial_depends: list[str] | None = None) -> int:
         """Declare a Real; returns its value reference."""
         if unit not in UNITS:
             raise KeyError(f"unit {unit!r} missing from UNITS")
@@ -156,8 +155,7 @@ class BlockSlave(Fmi2Slave):
             def setter(value, vr=vr_next):
                 self.r[vr] = value
                 self._dirty = True
-        if variability is None:
-            variability = "fixed" if causality == "parameter" else "continuous"
+        variability = "fixed" if causality == "parameter" else "continuous"
         initial = None
         if causality == "parameter":
             initial = "exact"
@@ -195,6 +193,9 @@ class BlockSlave(Fmi2Slave):
         setter = None
         if causality in ("input", "parameter"):
             def setter(value):
+                if causality == "parameter" and self._initialized:
+                    self._raise_to_importer(f"cannot set parameter {name}: parameters are fixed "
+                                            "once initialized")
                 self.other[name] = value
                 self._dirty = True
         initial = {"parameter": "exact", "output": "calculated"}.get(causality)
@@ -233,7 +234,7 @@ class BlockSlave(Fmi2Slave):
     def _index(self, vrs, allowed: np.ndarray, call: str) -> np.ndarray:
         """Value references as an index array, checked once per distinct list (importers batch
         the same references at every step)."""
-        key = (allowed is self._real, *vrs)
+        key = (id(allowed), *vrs)
         index = self._indices.get(key)
         if index is None:
             index = np.asarray(vrs, dtype=np.intp)
@@ -242,7 +243,10 @@ class BlockSlave(Fmi2Slave):
                        if not (0 <= v < len(self.r)) or not allowed[v]]
                 self._raise_to_importer(f"{call}: value references of {bad} do not name "
                                         + ("Real variables" if call == "fmi2GetReal" else
-                                           "Real inputs or parameters"))
+                                           "Real inputs" if self._initialized else
+                                           "Real inputs or parameters")
+                                        + " (parameters are fixed once initialized)"
+                                        * (call != "fmi2GetReal" and self._initialized))
             self._indices[key] = index
         return index
 
@@ -252,7 +256,8 @@ class BlockSlave(Fmi2Slave):
         return self.r[self._index(vrs, self._real, "fmi2GetReal")].tolist()
 
     def set_real(self, vrs, values):
-        self.r[self._index(vrs, self._settable_real, "fmi2SetReal")] = values
+        allowed = self._input_real if self._initialized else self._settable_real
+        self.r[self._index(vrs, allowed, "fmi2SetReal")] = values
         self._dirty = True
 
     def get_boolean(self, vrs):
@@ -423,9 +428,10 @@ class BlockSlave(Fmi2Slave):
                 SubElement(node, "Unknown", attrib)
             node = SubElement(structure, "InitialUnknowns")
             for v in sorted(outputs, key=lambda v: index[v.name]):
+                # at initialization outputs also depend on parameters: without an explicit list
+                # the attribute is left out, which declares a dependency on every known
                 attrib = {"index": str(index[v.name])}
-                deps = v.initial_depends if v.initial_depends is not None else v.depends
-                if deps is not None:
-                    attrib["dependencies"] = " ".join(str(i) for i in sorted(index[d] for d in deps))
+                if v.initial_depends is not None:
+                    attrib["dependencies"] = " ".join(str(i) for i in sorted(index[d] for d in v.initial_depends))
                 SubElement(node, "Unknown", attrib)
         return root

@@ -13,9 +13,8 @@ import numpy as np
 
 from ..ik import Unreachable, make_ik
 from ..robot import Robot
-from .base import BlockSlave
+from .base import DERIVATIVE_UNITS, BlockSlave
 
-_UNITS = {"m": ("m", "m/s", "m/s2"), "rad": ("rad", "rad/s", "rad/s2")}
 
 
 class IKSlave(BlockSlave):
@@ -29,7 +28,7 @@ class IKSlave(BlockSlave):
         coords = self.spec.task_coordinates
         m, n = len(coords), self.robot.n
         start = self.spec.scenario["waypoints"][0] if self.spec.scenario else [0.0] * m
-        units = [_UNITS[u] for u in self.spec.task_units]
+        units = [DERIVATIVE_UNITS[u] for u in self.spec.task_units]
         self.string("elbow", "IK branch: 'up' or 'down'", self.spec.raw.get("elbow", "up"))
         self.real("tool_pitch", "parameter", "rad", "Tool pitch q2 + q3 + q4 held by the IK",
                   self.spec.raw["tool_pitch"])
@@ -51,13 +50,15 @@ class IKSlave(BlockSlave):
         self.boolean("reachable", "output",
                      "False while the target lies outside the workspace (last valid solution held)",
                      depends=xs)
-        self.last = None
+        self.last = None          # last valid joint position
+        self.outside = False      # in an excursion outside the workspace (warned once per excursion)
         self.n = n
 
     def initialize(self):
         self.solver = make_ik(self.robot, tool_pitch=self.param("tool_pitch"),
                               elbow=str(self.other["elbow"]))
         self.last = None
+        self.outside = False
         self.evaluate()
 
     def evaluate(self):
@@ -67,13 +68,17 @@ class IKSlave(BlockSlave):
             if not math.isfinite(qd.sum() + qdd.sum()):
                 raise Unreachable(f"singular configuration at {r[self.x].tolist()}")
         except (Unreachable, np.linalg.LinAlgError) as exc:
-            if self.other["reachable"] or self.last is None:
-                self.warn(f"t = {self.time:.9g} s: {exc}; holding the last valid solution")
+            if not self.outside:
+                held = ("holding the last valid solution" if self.last is not None else
+                        "no valid solution yet: outputs zero")
+                self.warn(f"t = {self.time:.9g} s: {exc}; {held}")
+                self.outside = True
             self.other["reachable"] = False
-            q = np.zeros(self.n) if self.last is None else np.asarray(self.last)
+            q = np.zeros(self.n) if self.last is None else self.last
             qd = qdd = np.zeros(self.n)
         else:
             self.other["reachable"] = True
+            self.outside = False
             self.last = q
         r[self.q], r[self.qd], r[self.qdd] = q, qd, qdd
 
@@ -81,7 +86,8 @@ class IKSlave(BlockSlave):
         return True
 
     def logic_state(self):
-        return {"last": None if self.last is None else list(map(float, self.last))}
+        return {"last": None if self.last is None else list(map(float, self.last)), "outside": self.outside}
 
     def set_logic_state(self, state):
         self.last = None if state["last"] is None else np.array(state["last"])
+        self.outside = state["outside"]

@@ -3,9 +3,8 @@ from __future__ import annotations
 
 from ..trajectory import (WaypointTrajectory, format_matrix, format_vector, parse_matrix,
                           parse_vector)
-from .base import BlockSlave
+from .base import DERIVATIVE_UNITS, BlockSlave
 
-_DERIVATIVE_UNITS = {"m": ("m", "m/s", "m/s2"), "rad": ("rad", "rad/s", "rad/s2")}
 
 
 class TrajectorySlave(BlockSlave):
@@ -33,7 +32,7 @@ class TrajectorySlave(BlockSlave):
             self.integer("grip_open_after_move",
                          "The gripper opens at the end of this move (1-based; 0: never)",
                          s["grip_open_after_move"])
-        units = [_DERIVATIVE_UNITS[u] for u in self.spec.task_units]
+        units = [DERIVATIVE_UNITS[u] for u in self.spec.task_units]
         self.x = self.reals("x_ref", m, "output", [u[0] for u in units],
                             lambda i: f"Reference TCP coordinate {coords[i - 1]}", depends=[])
         self.xd = self.reals("xd_ref", m, "output", [u[1] for u in units],

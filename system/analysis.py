@@ -48,12 +48,10 @@ def tracking(result: Result, robot: Robot, events: dict[str, float] | None = Non
                     np.max(np.abs(result.vector("controller.tau")), axis=0))
 
 
-def chess_events(spec) -> dict[str, float]:
-    """Pick and place instants of the scenario: the ends of the grip-close and grip-open moves."""
-    s = spec.scenario
-    ends = np.cumsum(s["durations"]) + s["pause"] * np.arange(len(s["durations"]))
-    return {"pick (d2)": float(ends[s["grip_close_after_move"] - 1]),
-            "place (d4)": float(ends[s["grip_open_after_move"] - 1])}
+def grip_events(trajectory) -> dict[str, float]:
+    """Pick and place instants: when the gripper closes and opens (s); only those that happen."""
+    events = {"pick": trajectory.grip_close_time, "place": trajectory.grip_open_time}
+    return {k: float(t) for k, t in events.items() if np.isfinite(t)}
 
 
 def markdown_table(rows: list[list], header: list[str]) -> str:

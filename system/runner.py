@@ -10,6 +10,7 @@ from robofmu.components.robot import Robot, load_spec
 
 from . import analysis, experiment, plots
 from .master import Master, Result
+from .reference import LoopSetup
 
 
 def progress_printer(label: str, stream=sys.stderr):
@@ -54,7 +55,8 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     result = master.run(stop_time=stop_time, step=step, algorithm=algorithm, csv_path=out / "results.csv")
     robot_name = system.extra.get("robot", "chess")
     spec = load_spec(robot_name)
-    metrics = analysis.tracking(result, Robot(spec), analysis.chess_events(spec))
+    events = analysis.grip_events(LoopSetup.from_system(system).trajectory())
+    metrics = analysis.tracking(result, Robot(spec), events)
     section = analysis.tracking_report(name, system.description, metrics, result)
     made = []
     if figures:

@@ -56,14 +56,9 @@ gains from a requested 2 % settling time and overshoot, as MATLAB's
 ``updateErrorDynamicsFromStep`` does for its second-order error dynamics, but with the exact
 second-order settling time instead of the 4 / (zeta wn) rule of thumb.
 
-Co-simulation drivers (:func:`cosimulate_step`): ``"master"`` runs the diagram with the
-project's :class:`~robofmu.system.master.Master` (Gauss-Seidel); ``"direct"`` steps the two
-FMUs with a minimal independent loop (get q, qd from the plant, set them on the controller,
-get tau, set it on the plant, then doStep both). They agree bit for bit. The plant has no
-direct feedthrough, so the master evaluates it before the controller; it must set the plant's
-torque input again after the controller has been evaluated, or the plant integrates the torque
-of t_(k-1) (and 0 over the first step): a loop like that is 3.6 % (1 ms) and 20 % (5 ms) of
-the step height off the sampled-data prediction (the master did that before commit 55b065a).
+Co-simulation (:func:`cosimulate_step`): the diagram runs on the project's
+:class:`~robofmu.system.master.Master`, Gauss-Seidel by default (``driver="jacobi"`` for its
+Jacobi scheme).
 """
 from __future__ import annotations
 
@@ -681,40 +676,6 @@ def step_system(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0, ste
         description=f"reference step of {step} rad on joint(s) {js}")
 
 
-def _direct_run(system: System, t_end: float, h: float) -> Result:
-    """Step controller + plant with the torque of the same communication point (reference driver)."""
-    from .fmu import Block
-
-    n_steps = int(round(t_end / h))
-    ctrl_spec, plant_spec = system.block("controller"), system.block("plant")
-    ctrl = Block(system.fmu_path(ctrl_spec), "controller")
-    plant = Block(system.fmu_path(plant_spec), "plant")
-    try:
-        ctrl.initialize(0.0, ctrl_spec.parameters, stop_time=t_end)
-        plant.initialize(0.0, plant_spec.parameters, stop_time=t_end)
-        p_out, c_in = plant.vrs("q", "qd"), ctrl.vrs("q", "qd")
-        c_tau, p_tau = ctrl.vrs("tau"), plant.vrs("tau")
-        n = len(c_tau)
-        rec = np.empty((n_steps + 1, 3 * n))
-        times = h * np.arange(n_steps + 1)
-        for k in range(n_steps + 1):
-            x = plant.get_real(p_out)
-            ctrl.set_real(c_in, x)
-            tau = ctrl.get_real(c_tau)
-            plant.set_real(p_tau, tau)
-            rec[k, :2 * n], rec[k, 2 * n:] = x, tau
-            if k == n_steps:
-                break
-            ctrl.do_step(times[k], h)
-            plant.do_step(times[k], h)
-    finally:
-        ctrl.close()
-        plant.close()
-    cols = ([f"plant.q[{i}]" for i in range(1, n + 1)] + [f"plant.qd[{i}]" for i in range(1, n + 1)]
-            + [f"controller.tau[{i}]" for i in range(1, n + 1)])
-    return Result(times, cols, rec, {"step": h, "driver": "direct"})
-
-
 def cosimulate_step(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0, step: float = 0.02,
                     h: float = 1e-3, t_end: float = 1.0, joint: int | Sequence[int] | None = None,
                     q0: Sequence[float] = DEFAULT_Q0, robot: str = "chess",
@@ -737,11 +698,8 @@ def cosimulate_step(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0,
         Stepped joint(s), from 1; None: every joint.
     q0 : sequence of float, shape (n,)
         Start pose (rad).
-    driver : {"master", "gauss-seidel", "jacobi", "direct"}
-        "master" / "gauss-seidel": :class:`~robofmu.system.master.Master` (Gauss-Seidel);
-        "jacobi": the master's Jacobi scheme; "direct": the two-FMU reference loop that sets
-        the plant's torque of the same communication point before its doStep (see the
-        module notes).
+    driver : {"master", "jacobi"}
+        :class:`~robofmu.system.master.Master` with Gauss-Seidel ("master") or Jacobi.
 
     Returns
     -------
@@ -753,16 +711,11 @@ def cosimulate_step(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0,
     h = _check_step(h)
     system = step_system(fmu_root, kp, kd, ki, step, h, t_end, joint, q0, robot)
     q0a = np.asarray(q0, dtype=float).reshape(-1)
-    if driver == "direct":
-        result = _direct_run(system, float(t_end), h)
-        diagram_warnings: list[str] = []
-    elif driver in ("master", "gauss-seidel", "jacobi"):
-        master = Master(system, record=["plant.q*", "controller.tau*"])
-        diagram_warnings = master.check()
-        algorithm = "jacobi" if driver == "jacobi" else "gauss-seidel"
-        result = master.run(float(t_end), h, algorithm)
-    else:
-        raise ValueError(f"driver {driver!r}: choose master, gauss-seidel, jacobi or direct")
+    if driver not in ("master", "jacobi"):
+        raise ValueError(f"driver {driver!r}: choose master or jacobi")
+    master = Master(system, record=["plant.q*", "controller.tau*"])
+    diagram_warnings = master.check()
+    result = master.run(float(t_end), h, "jacobi" if driver == "jacobi" else "gauss-seidel")
     result.info.update(kp=float(kp), kd=float(kd), ki=float(ki), h=h, height=float(step),
                        joints=_joints(joint, q0a.size), q0=q0a.tolist(),
                        q_ref=system.block("controller").parameters["q_ref"], driver=driver,
@@ -1066,7 +1019,7 @@ def add_step_command(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--joint", type=int, metavar="J", help="step joint J only (from 1; default: all)")
     p.add_argument("--q0", type=float, nargs="+", metavar="Q", help=f"start pose (rad, default {DEFAULT_Q0})")
     p.add_argument("--t-end", type=float, metavar="T", help="stop time (s; default 1, or 3 x settling time)")
-    p.add_argument("--driver", choices=("master", "jacobi", "direct"), default="master",
+    p.add_argument("--driver", choices=("master", "jacobi"), default="master",
                    help="co-simulation driver (default master: the project's Gauss-Seidel master)")
     p.add_argument("--robot", default="chess", help="robot (default chess)")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU root holding ROBOT/*.fmu (default fmus)")

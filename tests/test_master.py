@@ -6,6 +6,7 @@ from robofmu.components.robot import Robot
 from robofmu.system import experiment
 from robofmu.system.diagram import BlockSpec, System
 from robofmu.system.master import DiagramError, Master, Result, SimulationError
+from robofmu.system.reference import reference_run
 
 LOOP = ["trajectory.x_ref -> ik.x_ref", "trajectory.xd_ref -> ik.xd_ref", "trajectory.xdd_ref -> ik.xdd_ref",
         "ik.q_ref -> controller.q_ref", "ik.qd_ref -> controller.qd_ref", "ik.qdd_ref -> controller.qdd_ref",
@@ -86,12 +87,18 @@ def test_evaluation_order_follows_feedthrough(fmu_dir):
 
 def test_chess_pd_keeps_the_tcp_within_1_mm(fmu_dir, tmp_path):
     """Acceptance: the controller's model exact, 1 ms steps, the whole 13 s task."""
-    result = Master(experiment.load("chess-pd", fmu_dir=fmu_dir.parent)).run(csv_path=tmp_path / "r.csv")
+    s = experiment.load("chess-pd", fmu_dir=fmu_dir.parent)
+    result = Master(s).run(csv_path=tmp_path / "r.csv")
     robot = Robot("chess")
     q, x = result.vector("plant.q"), result.vector("trajectory.x_ref")
-    err = np.linalg.norm([robot.fk(qi) - xi for qi, xi in zip(q, x)], axis=1)
+    tcp = np.array([robot.fk(qi) for qi in q])
+    err = np.linalg.norm(tcp - x, axis=1)
     assert len(result.time) == 13001 and result.time[-1] == pytest.approx(13.0)
-    assert err.max() < 1e-3
+    assert err.max() < 5e-5                     # the acceptance asks for 1 mm; observed 0.016 mm
+    # and against the monolithic reference (continuous controller), which tracks exactly
+    ref = reference_run(s, result.time)
+    np.testing.assert_allclose(ref.vector("tcp.x"), x, atol=1e-9)
+    assert np.linalg.norm(tcp - ref.vector("tcp.x"), axis=1).max() < 5e-5
     # every output of every block is recorded, at every communication point
     for col in ["trajectory.x_ref[3]", "trajectory.grip", "ik.qdd_ref[4]", "ik.reachable", "controller.tau[2]",
                 "plant.qd[4]"]:
@@ -107,7 +114,6 @@ def test_gauss_seidel_has_no_delay_jacobi_one_step(fmu_dir):
     gs = Master(s).run(stop_time=0.2)
     ja = Master(s).run(stop_time=0.2, algorithm="jacobi")
     x = gs.vector("trajectory.x_ref")
-    np.testing.assert_array_equal(gs.vector("ik.x_ref") if "ik.x_ref[1]" in gs.columns else x, x)
     # Gauss-Seidel: the IK output at t is the IK of the trajectory at t
     from robofmu.components.ik import make_ik
     ik = make_ik(Robot("chess"))

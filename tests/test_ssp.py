@@ -256,7 +256,7 @@ def test_libcosim_reproduces_the_master_in_jacobi_mode(runs, h):
     lc, jac = runs("libcosim", h), runs("jacobi", h)
     np.testing.assert_allclose(lc.time, jac.time, rtol=0, atol=1e-12)
     for name in ("plant.q", "plant.qd", "controller.tau", "ik.q_ref"):
-        np.testing.assert_allclose(lc.vector(name), jac.vector(name), rtol=0, atol=1e-9, err_msg=name)
+        np.testing.assert_allclose(lc.vector(name), jac.vector(name), rtol=0, atol=1e-12, err_msg=name)
 
 
 def test_libcosim_against_gauss_seidel_differs_by_its_delays(runs):

@@ -9,7 +9,7 @@ Runners (each in a fresh child process, one after the other):
 - ``in-process``: :func:`robofmu.system.convergence.sampled_loop`, the FMI-free logic
   (WaypointTrajectory.evaluate and grip, make_ik(robot).solve, ComputedTorque.torque/advance,
   Plant.step) called in the master's order, the same outputs recorded into a preallocated
-  array: it must reproduce the master exactly (the correctness lines);
+  array: it should reproduce the master exactly (the correctness lines print the difference);
 - ``libcosim``: :func:`robofmu.system.ssp.run_ssp_libcosim` on ``export_ssp(system)``
   (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
   observer, Booleans cannot be).

@@ -142,14 +142,6 @@ class Robot:
             self.model, self.data, self.tcp_id, pin.LOCAL_WORLD_ALIGNED
         ).linear.copy()
 
-    def tcp_velocity(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """TCP linear velocity (m/s) in world axes, shape (3,)."""
-        pin.forwardKinematics(self.model, self.data, q, qd)
-        return pin.getFrameVelocity(
-            self.model, self.data, self.tcp_id, pin.LOCAL_WORLD_ALIGNED
-        ).linear.copy()
-
-    # -- dynamics: M(q) qdd + C(q, qd) qd + g(q) = tau -------------------------------------
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """Joint-space inertia matrix M(q), shape (n, n), symmetric."""
         upper = pin.crba(self.model, self.data, q)

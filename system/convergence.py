@@ -139,7 +139,7 @@ def sampled_loop(setup: LoopSetup, step: float, stop_time: float) -> Result:
     from robofmu.components.plant import Plant
 
     h = float(step)
-    n_steps = int(round(stop_time / h))
+    n_steps = step_count(0.0, stop_time, h)
     trajectory = setup.trajectory()
     plant = Plant(Robot(setup.robot, gravity=setup.gravity), setup.q0, setup.qd0,
                   payload_mass=setup.payload, max_substep=setup.max_substep)

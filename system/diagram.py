@@ -178,9 +178,3 @@ class System:
             raise ValueError(f"{path}: {exc}") from None
         return cls.from_dict(data, fmu_dir)
 
-    def to_dict(self) -> dict:
-        return {"name": self.name, "description": self.description, "stop_time": self.stop_time,
-                "step": self.step, "algorithm": self.algorithm,
-                "blocks": [{"name": b.name, "fmu": str(b.fmu), "parameters": dict(b.parameters)}
-                           for b in self.blocks],
-                "connections": [str(w) for w in self.wires], **self.extra}

@@ -282,9 +282,6 @@ class CosimRun:
         t = self.time
         self._check(self.execution.step(count), f"{count} step(s) from t = {t:.9g} s")
 
-    def simulate_until(self, t: float) -> None:
-        self._check(self.execution.simulate_until(to_ns(t)), f"simulate until {t:.9g} s")
-
     @property
     def time(self) -> float:
         return self.execution.status().current_time / NANO

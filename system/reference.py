@@ -50,7 +50,7 @@ from robofmu.components.trajectory import (WaypointTrajectory, format_matrix, fo
                                            parse_matrix, parse_vector)
 
 from .diagram import System
-from .master import Result
+from .master import Result, step_count
 
 __all__ = ["LoopSetup", "MonolithicLoop", "reference_run", "discontinuities"]
 
@@ -461,7 +461,7 @@ def reference_run(system: System | LoopSetup, times=None, rtol: float = 1e-10,
     if times is None:
         if not isinstance(system, System):
             raise ValueError("times: required when a LoopSetup is given")
-        k = int(round(system.stop_time / system.step))
+        k = step_count(0.0, system.stop_time, system.step)
         times = system.step * np.arange(k + 1)
     times = np.atleast_1d(np.asarray(times, dtype=float))
     loop = MonolithicLoop(setup, rtol, atol).solve(float(times.max()))

@@ -295,9 +295,6 @@ class StepMetrics:
     y0: float
     t0: float
 
-    def as_dict(self) -> dict:
-        return asdict(self)
-
     def step_info(self) -> dict:
         """The same metrics as python-control's ``step_info`` would give for y - y0, t - t0."""
         return {"RiseTime": self.rise_time, "SettlingTime": self.settling_time,

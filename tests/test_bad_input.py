@@ -1,5 +1,4 @@
 """Bad input: clear errors naming the parameter or variable, FMI error statuses, nothing lost."""
-import shutil
 import zipfile
 
 import numpy as np

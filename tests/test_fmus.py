@@ -12,7 +12,6 @@ from scipy.integrate import solve_ivp
 from robofmu.components.control import ComputedTorque
 from robofmu.components.ik import ChessIK
 from robofmu.components.robot import Robot
-from robofmu.system.fmu import Block
 
 from fmu_util import ChessLoop, open_block
 

@@ -8,7 +8,7 @@ import pytest
 
 from robofmu.components.ik import make_ik
 from robofmu.components.robot import Robot
-from robofmu.system.convergence import observed_order, run_cosim, sampled_loop, study
+from robofmu.system.convergence import observed_order, sampled_loop, study
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
 from robofmu.system.reference import LoopSetup, MonolithicLoop, discontinuities, reference_run

@@ -350,6 +350,7 @@ class Master:
         ridx = {(b, n): k for k, (b, n, _) in enumerate(real_out)}
         bidx = {(b, n): k for k, (b, n, _) in enumerate(bool_out)}
         self.ports = {}
+        rank = {n: k for k, n in enumerate(self.order)}
         for name in self.order:
             rows = [k for k, (b, _, _) in enumerate(real_out) if b == name]
             brows = [k for k, (b, _, _) in enumerate(bool_out) if b == name]
@@ -360,7 +361,6 @@ class Master:
             # Inputs from blocks evaluated earlier are set before this block's outputs are read;
             # inputs from blocks evaluated later cannot affect those outputs (the order is
             # topological in the feedthrough graph) and are set after the pass, before doStep.
-            rank = {n: k for k, n in enumerate(self.order)}
             links = [lk for lk in self.links if lk[2] == name]
             early = _Inputs([lk for lk in links if rank[lk[0]] < rank[name]], self.nodes[name].variables, ridx, bidx)
             late = _Inputs([lk for lk in links if rank[lk[0]] >= rank[name]], self.nodes[name].variables, ridx, bidx)
@@ -392,12 +392,11 @@ class Master:
             early.append(_sets(fn, inputs_early, sig, bsig, name))
             late.append(_sets(fn, inputs_late, sig, bsig, name))
             steps.append(_step(fn, name))
+        gauss_seidel = [op for e, p in zip(early, pull) for op in e + p] + [op for ops in late for op in ops]
         if algorithm == "gauss-seidel":
-            exchange = [op for e, p in zip(early, pull) for op in e + p] + [op for ops in late for op in ops]
-        else:
-            exchange = [op for ops in pull for op in ops] + [op for e, lt in zip(early, late) for op in e + lt]
-        first = [op for e, p in zip(early, pull) for op in e + p] + [op for ops in late for op in ops]
-        return first, exchange, steps
+            return gauss_seidel, gauss_seidel, steps
+        jacobi = [op for ops in pull for op in ops] + [op for e, lt in zip(early, late) for op in e + lt]
+        return gauss_seidel, jacobi, steps     # Jacobi, too, starts from a consistent first exchange
 
     def _loop(self, t0: float, h: float, n_steps: int, algorithm: str, csv_path) -> Result:
         self._layout()

@@ -118,11 +118,11 @@ class BlockSlave(Fmi2Slave):
         self.r = np.array(self._starts, dtype=float)
         kinds = np.array(self._kinds)
         caus = np.array(self._causalities)
-        self._settable_real = (kinds == "Real") & ((caus == "input") | (caus == "parameter"))
-        self._input_real = (kinds == "Real") & (caus == "input")     # settable once initialized
         self._real = kinds == "Real"
-        self._input_vrs = np.flatnonzero((kinds == "Real") & (caus == "input"))
-        self._input_mask = ((kinds == "Real") & (caus == "input")).astype(float)
+        self._input_real = self._real & (caus == "input")          # settable once initialized
+        self._settable_real = self._input_real | (self._real & (caus == "parameter"))
+        self._input_vrs = np.flatnonzero(self._input_real)
+        self._input_mask = self._input_real.astype(float)
         self._indices: dict[tuple, np.ndarray] = {}
         self._names = [None] * n
         for v in self.meta.values():
@@ -241,12 +241,13 @@ class BlockSlave(Fmi2Slave):
             if index.size and (index.min() < 0 or index.max() >= len(self.r) or not allowed[index].all()):
                 bad = [self._names[v] if 0 <= v < len(self.r) else v for v in vrs
                        if not (0 <= v < len(self.r)) or not allowed[v]]
-                self._raise_to_importer(f"{call}: value references of {bad} do not name "
-                                        + ("Real variables" if call == "fmi2GetReal" else
-                                           "Real inputs" if self._initialized else
-                                           "Real inputs or parameters")
-                                        + " (parameters are fixed once initialized)"
-                                        * (call != "fmi2GetReal" and self._initialized))
+                if allowed is self._real:
+                    wanted = "Real variables"
+                elif self._initialized:
+                    wanted = "Real inputs (parameters are fixed once initialized)"
+                else:
+                    wanted = "Real inputs or parameters"
+                self._raise_to_importer(f"{call}: value references of {bad} do not name {wanted}")
             self._indices[key] = index
         return index
 

@@ -41,8 +41,7 @@ def cases(fmu_dir: Path):
     spec = load_spec("chess")
     s = spec.scenario
     robot = Robot(spec)
-    traj = WaypointTrajectory(s["waypoints"], s["durations"], s["pause"], s["cruise_factor"],
-                              s["grip_close_after_move"], s["grip_open_after_move"])
+    traj = WaypointTrajectory.from_scenario(s)
     ik = make_ik(robot)
     x = [np.array(v) for v in traj.evaluate(2.0)]
     q, qd, qdd = ik.solve(*x)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .robot import Robot
+from .robots.model import RobotModel
 
 
 class ComputedTorque:
@@ -15,7 +15,7 @@ class ComputedTorque:
 
     Parameters
     ----------
-    robot : Robot
+    robot : RobotModel
         The controller's model of the arm (its payload is what the controller believes).
     kp, kd, ki : float
         Gains (1/s^2, 1/s, 1/s^3), >= 0, the same on every joint.
@@ -26,7 +26,7 @@ class ComputedTorque:
     (z += e h), matching the zero-order hold of a sampled controller.
     """
 
-    def __init__(self, robot: Robot, kp: float, kd: float, ki: float = 0.0):
+    def __init__(self, robot: RobotModel, kp: float, kd: float, ki: float = 0.0):
         for name, value in (("kp", kp), ("kd", kd), ("ki", ki)):
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name}: gain must be finite and >= 0, got {value}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .integrators import rk4
-from .robot import Robot
+from .robots.model import RobotModel
 
 
 class PlantDiverged(FloatingPointError):
@@ -16,7 +16,7 @@ class Plant:
 
     Parameters
     ----------
-    robot : Robot
+    robot : RobotModel
         The true arm (its own model; ``grip`` adds the payload to it).
     q0, qd0 : array_like, shape (n,)
         Initial joint positions (rad or m) and velocities (rad/s or m/s).
@@ -26,7 +26,7 @@ class Plant:
         Largest RK4 sub-step (s) inside a step, > 0.
     """
 
-    def __init__(self, robot: Robot, q0, qd0, payload_mass: float = 0.0, max_substep: float = 1e-3):
+    def __init__(self, robot: RobotModel, q0, qd0, payload_mass: float = 0.0, max_substep: float = 1e-3):
         if not (np.isfinite(payload_mass) and payload_mass >= 0.0):
             raise ValueError(f"payload_mass: must be finite and >= 0 kg, got {payload_mass}")
         if not (np.isfinite(max_substep) and max_substep > 0.0):

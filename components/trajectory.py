@@ -1,5 +1,11 @@
-"""Trajectory profiles: linear segments with parabolic blends (LSPB) through waypoints.
+"""Trajectory profiles: LSPB through waypoints, a straight line with a trapezoidal speed profile,
+and a synchronized minimum-time bang-bang in joint space.
 
+Every profile has ``dim``, ``duration``, ``breakpoints`` (the instants where its acceleration
+jumps) and ``evaluate(t, snap=True) -> (x, xd, xdd)``; it rests at its start before 0 and at its
+end after ``duration``.
+
+LSPB: 
 A move from x0 to x1 in time T with cruise speed V (per axis, |V| in (|dx|/T, 2|dx|/T]) blends
 for tb = T - dx/V at constant acceleration a = V/tb, cruises, and blends to rest. With the
 common default V = 1.5 dx/T: tb = T/3 and a = 4.5 dx/T^2.
@@ -41,6 +47,36 @@ def lspb(x0: np.ndarray, x1: np.ndarray, T: float, t: float, cruise_factor: floa
         return x0 + 0.5 * a * tb * tb + V * (t - tb), V.copy(), np.zeros_like(dx)
     r = T - t
     return x0 + dx - 0.5 * a * r * r, a * r, -a
+
+
+#: Communication points within this many seconds of a breakpoint are evaluated at it.
+SNAP_TOLERANCE = 1e-9
+
+
+def snap_to(breakpoints: np.ndarray, t: float, tol: float = SNAP_TOLERANCE) -> float:
+    """``t`` moved onto a breakpoint within ``tol`` s, so that communication points that land on
+    one by rounding (3.4995 + 5e-4) evaluate the same branch as the exact instant."""
+    k = int(np.searchsorted(breakpoints, t))
+    for j in (k - 1, k):
+        if 0 <= j < len(breakpoints) and abs(breakpoints[j] - t) <= tol:
+            return float(breakpoints[j])
+    return t
+
+
+def _finite_vector(value, name: str, length: int | None = None) -> np.ndarray:
+    v = np.asarray(value, dtype=float)
+    if v.ndim != 1 or (length is not None and v.shape[0] != length):
+        raise ValueError(f"{name}: need {length or 'a vector of'} values, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name}: every value must be finite, got {v.tolist()}")
+    return v
+
+
+def _positive(value: float, name: str, unit: str) -> float:
+    value = float(value)
+    if not (np.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name}: must be > 0 {unit}, got {value}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -122,22 +158,8 @@ class WaypointTrajectory:
             [self._starts, [self.duration], [s.start + b for s, b in zip(moves, blends)],
              [s.end - b for s, b in zip(moves, blends)]]))
 
-    @classmethod
-    def from_scenario(cls, scenario: dict) -> "WaypointTrajectory":
-        """The trajectory of a robot description's ``[scenario]`` table."""
-        return cls(scenario["waypoints"], scenario["durations"], scenario.get("pause", 0.0),
-                   scenario.get("cruise_factor", 1.5), scenario.get("grip_close_after_move", 0),
-                   scenario.get("grip_open_after_move", 0))
-
-    def _snap(self, t: float, tol: float = 1e-9) -> float:
-        """``t`` moved onto a breakpoint (segment boundary or blend switch) within ``tol`` s, so
-        that communication points that land on one by rounding (3.4995 + 5e-4) evaluate the same
-        branch as the exact instant."""
-        k = int(np.searchsorted(self.breakpoints, t))
-        for j in (k - 1, k):
-            if 0 <= j < len(self.breakpoints) and abs(self.breakpoints[j] - t) <= tol:
-                return float(self.breakpoints[j])
-        return t
+    def _snap(self, t: float) -> float:
+        return snap_to(self.breakpoints, t)
 
     def evaluate(self, t: float, snap: bool = True):
         """Reference position, velocity and acceleration at time ``t`` (s), each shape (m,).
@@ -165,39 +187,117 @@ class WaypointTrajectory:
         return bool(closed and not opened)
 
 
-def parse_matrix(text: str, name: str, columns: int | None = None) -> np.ndarray:
-    """Parse ``"x y z; x y z; ..."`` (commas also separate numbers) into a 2-D array.
+class StraightLine:
+    """A straight line at minimum time under speed and acceleration limits (trapezoidal speed).
 
-    Raises ValueError naming ``name`` if the text is malformed.
+    The path s(t) runs from 0 to ``length`` along ``direction``: it accelerates at a_max to
+    v_max (at t1 = v_max / a_max), cruises, and decelerates to rest at T = length / v_max + t1.
+    If the line is too short to reach v_max (length < v_max^2 / a_max) the profile is
+    triangular: t1 = T / 2 = sqrt(length / a_max), peak speed a_max t1.
+
+    Parameters
+    ----------
+    start : array_like, shape (m,)
+        Start point (m).
+    direction : array_like, shape (m,)
+        Direction of travel; normalized here (must not be zero).
+    length : float
+        Path length (m), > 0.
+    v_max, a_max : float
+        Speed (m/s) and acceleration (m/s^2) limits along the path, > 0.
     """
-    rows = [r for r in text.replace("\n", ";").split(";") if r.strip()]
-    try:
-        values = [[float(v) for v in r.replace(",", " ").split()] for r in rows]
-    except ValueError as exc:
-        raise ValueError(f"{name}: malformed number ({exc}) in {text!r}") from None
-    if not values or len({len(v) for v in values}) != 1:
-        raise ValueError(f"{name}: rows must all have the same number of values, got {text!r}")
-    if columns is not None and len(values[0]) != columns:
-        raise ValueError(f"{name}: each row needs {columns} values, got {len(values[0])} in {text!r}")
-    return np.array(values)
+
+    def __init__(self, start, direction, length: float, v_max: float, a_max: float):
+        self.start = _finite_vector(start, "start")
+        d = _finite_vector(direction, "direction", len(self.start))
+        norm = float(np.linalg.norm(d))
+        if norm == 0.0:
+            raise ValueError("direction: must not be the zero vector")
+        self.direction = d / norm
+        self.length = _positive(length, "length", "m")
+        self.v_max = _positive(v_max, "v_max", "m/s")
+        self.a_max = _positive(a_max, "a_max", "m/s2")
+        self.dim = len(self.start)
+        if self.length >= self.v_max ** 2 / self.a_max:
+            self.t1 = self.v_max / self.a_max
+            self.duration = self.length / self.v_max + self.t1
+        else:
+            self.t1 = float(np.sqrt(self.length / self.a_max))
+            self.duration = 2.0 * self.t1
+        self.v_peak = self.a_max * self.t1
+        self.end = self.start + self.length * self.direction
+        self.breakpoints = np.unique([0.0, self.t1, self.duration - self.t1, self.duration])
+
+    def path(self, t: float) -> tuple[float, float, float]:
+        """Arc length (m), speed (m/s) and acceleration (m/s^2) along the line at ``t``."""
+        T, t1, a = self.duration, self.t1, self.a_max
+        if t <= 0.0:
+            return 0.0, 0.0, 0.0
+        if t >= T:
+            return self.length, 0.0, 0.0
+        if t < t1:
+            return 0.5 * a * t * t, a * t, a
+        if t <= T - t1:
+            return 0.5 * a * t1 * t1 + self.v_peak * (t - t1), self.v_peak, 0.0
+        r = T - t
+        return self.length - 0.5 * a * r * r, a * r, -a
+
+    def evaluate(self, t: float, snap: bool = True):
+        """Position (m), velocity (m/s), acceleration (m/s^2) at ``t``, each shape (m,)."""
+        if snap:
+            t = snap_to(self.breakpoints, t)
+        s, v, a = self.path(t)
+        d = self.direction
+        return self.start + s * d, v * d, a * d
 
 
-def parse_vector(text: str, name: str) -> np.ndarray:
-    """Parse ``"1 3 1"`` (or comma-separated) into a 1-D array; ValueError naming ``name``."""
-    try:
-        values = [float(v) for v in text.replace(",", " ").split()]
-    except ValueError as exc:
-        raise ValueError(f"{name}: malformed number ({exc}) in {text!r}") from None
-    if not values:
-        raise ValueError(f"{name}: empty")
-    return np.array(values)
+class SynchronizedBangBang:
+    """Minimum-time bang-bang in joint space, every joint finishing at the same time.
 
+    Joint j alone needs T_min,j = 2 sqrt(|dq_j| / a_max,j) (accelerate at a_max,j for half the
+    time, decelerate for the other half). All joints move in T = max_j T_min,j, joint j with
+    the rescaled acceleration a_j = 4 dq_j / T^2 (signed), switching at T / 2; the peak
+    velocity is a_j T / 2.
 
-def format_matrix(rows) -> str:
-    """Inverse of :func:`parse_matrix`, exact for floats (repr)."""
-    return "; ".join(" ".join(repr(float(v)) for v in row) for row in np.atleast_2d(rows))
+    Parameters
+    ----------
+    q_start, q_end : array_like, shape (n,)
+        Rest positions (rad or m).
+    a_max : array_like, shape (n,)
+        Acceleration limits (rad/s^2 or m/s^2), > 0.
+    """
 
+    def __init__(self, q_start, q_end, a_max):
+        self.q_start = _finite_vector(q_start, "q_start")
+        self.dim = len(self.q_start)
+        self.q_end = _finite_vector(q_end, "q_end", self.dim)
+        a = _finite_vector(a_max, "a_max", self.dim)
+        bad = np.flatnonzero(a <= 0.0)
+        if bad.size:
+            raise ValueError(f"a_max[{bad[0] + 1}]: must be > 0, got {a[bad[0]]}")
+        self.a_max = a
+        delta = self.q_end - self.q_start
+        self.t_min = 2.0 * np.sqrt(np.abs(delta) / a)
+        self.duration = float(self.t_min.max())
+        if self.duration == 0.0:
+            self.acceleration = np.zeros(self.dim)
+        else:
+            self.acceleration = 4.0 * delta / self.duration ** 2
+        self.switch_time = 0.5 * self.duration
+        self.peak_velocity = self.acceleration * self.switch_time
+        self.breakpoints = np.unique([0.0, self.switch_time, self.duration])
 
-def format_vector(values) -> str:
-    """Inverse of :func:`parse_vector`."""
-    return " ".join(repr(float(v)) for v in values)
+    def evaluate(self, t: float, snap: bool = True):
+        """Position, velocity and acceleration (joint units) at ``t``, each shape (n,)."""
+        if snap:
+            t = snap_to(self.breakpoints, t)
+        zero = np.zeros(self.dim)
+        if t <= 0.0 or self.duration == 0.0:
+            return self.q_start.copy(), zero, zero.copy()
+        if t >= self.duration:
+            return self.q_end.copy(), zero, zero.copy()
+        a = self.acceleration
+        if t < self.switch_time:
+            return self.q_start + 0.5 * a * t * t, a * t, a.copy()
+        r = self.duration - t
+        return self.q_end - 0.5 * a * r * r, a * r, -a

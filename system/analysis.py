@@ -1,57 +1,68 @@
-"""Tracking metrics of a chess run: joint errors, TCP error at the pick and place instants, torques."""
+"""Tracking metrics of a run, for any robot: joint errors, task-point error, efforts.
+
+Signals are read by role (:class:`~robofmu.system.roles.Roles`), units from the result.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from robofmu.components.robot import Robot
-
-from .master import Result
+from .result import Result
+from .roles import Roles
+from .units import printed, small
 
 
 @dataclass
 class Tracking:
-    """Metrics of one run (SI units; arrays have one entry per joint).
+    """Metrics of one run (SI; arrays have one entry per joint).
 
     Attributes
     ----------
     max_error, rms_error : ndarray, shape (n,)
-        max |q_ref - q| and RMS of q_ref - q over the run (rad).
-    tcp_error : ndarray, shape (k,)
-        |FK(q) - x_ref| at every recorded point (m).
+        max |q_ref - q| and RMS of q_ref - q (joint units: rad or m).
+    joint_units, effort_units : list of str
+    tcp_error : ndarray, shape (k,) or None
+        |FK(q) - x_ref| at every recorded point (task units), where the run has a task reference.
     events : dict
-        name -> (time in s, TCP error in m), e.g. the pick and place instants.
-    peak_torque : ndarray, shape (n,)
-        max |tau| (N.m).
+        name -> (time in s, task-point error or NaN), e.g. when the gripper closes.
+    peak_effort : ndarray, shape (n,)
+        max |tau| (N.m or N).
+    final_error : ndarray, shape (n,)
+        q_ref - q at the last point.
+    final_speed : ndarray, shape (n,) or None
+        |qd| at the last point.
     """
 
     max_error: np.ndarray
     rms_error: np.ndarray
-    tcp_error: np.ndarray
+    joint_units: list
+    effort_units: list
+    tcp_error: np.ndarray | None
     events: dict
-    peak_torque: np.ndarray
+    peak_effort: np.ndarray
+    final_error: np.ndarray
+    final_speed: np.ndarray | None
 
 
-def tracking(result: Result, robot: Robot, events: dict[str, float] | None = None) -> Tracking:
-    """Metrics of a run recorded with ``ik.q_ref``, ``plant.q``, ``trajectory.x_ref``, ``controller.tau``."""
-    q, q_ref = result.vector("plant.q"), result.vector("ik.q_ref")
+def tracking(result: Result, roles: Roles) -> Tracking:
+    """Metrics of a run recording the roles ``q``, ``q_ref`` and ``tau`` (``x_ref``, ``grip`` if any)."""
+    roles.require("q", "q_ref", "tau")
+    q, q_ref = roles.vector(result, "q"), roles.vector(result, "q_ref")
+    tau = roles.vector(result, "tau")
     e = q_ref - q
-    x_ref = result.vector("trajectory.x_ref")
-    tcp = np.array([robot.fk(qi) for qi in q])
-    tcp_error = np.linalg.norm(tcp - x_ref, axis=1)
+    model = roles.model()
+    n = q.shape[1]
+    joint_units = [result.units.get(f"{roles.q}[{j + 1}]") or u for j, u in enumerate(model.joint_units(0))]
+    effort_units = [result.units.get(f"{roles.tau}[{j + 1}]") or u for j, u in enumerate(model.effort_units())]
+    tcp = roles.tcp_error(result, model)
     ev = {}
-    for name, t in (events or {}).items():
+    for name, t in roles.events(result).items():
         k = int(np.argmin(np.abs(result.time - t)))
-        ev[name] = (float(result.time[k]), float(tcp_error[k]))
-    return Tracking(np.max(np.abs(e), axis=0), np.sqrt(np.mean(e**2, axis=0)), tcp_error, ev,
-                    np.max(np.abs(result.vector("controller.tau")), axis=0))
-
-
-def grip_events(trajectory) -> dict[str, float]:
-    """Pick and place instants: when the gripper closes and opens (s); only those that happen."""
-    events = {"pick": trajectory.grip_close_time, "place": trajectory.grip_open_time}
-    return {k: float(t) for k, t in events.items() if np.isfinite(t)}
+        ev[name] = (float(result.time[k]), float(tcp[k]) if tcp is not None else float("nan"))
+    speed = np.abs(result.vector(roles.qd)[-1]) if roles.qd and f"{roles.qd}[1]" in result.columns else None
+    return Tracking(np.max(np.abs(e), axis=0), np.sqrt(np.mean(e ** 2, axis=0)), joint_units[:n],
+                    effort_units[:n], tcp, ev, np.max(np.abs(tau), axis=0), e[-1], speed)
 
 
 def markdown_table(rows: list[list], header: list[str]) -> str:
@@ -60,16 +71,29 @@ def markdown_table(rows: list[list], header: list[str]) -> str:
     return "\n".join(lines)
 
 
+def joint_table(m: Tracking) -> str:
+    """One row per joint: max and RMS error (mrad or mm), peak effort (N·m or N)."""
+    rows = []
+    for j in range(len(m.max_error)):
+        factor, unit = small(m.joint_units[j])
+        rows.append([f"q{j + 1}", f"{m.max_error[j] * factor:.4f} {unit}", f"{m.rms_error[j] * factor:.4f} {unit}",
+                     f"{m.final_error[j] * factor:.4f} {unit}",
+                     f"{m.peak_effort[j]:.4f} {printed(m.effort_units[j])}"])
+    return markdown_table(rows, ["joint", "max error", "RMS error", "error at the end", "peak effort"])
+
+
 def tracking_report(name: str, description: str, m: Tracking, result: Result) -> str:
     """Markdown section for one experiment."""
-    n = len(m.max_error)
-    rows = [[f"q{j + 1}", f"{m.max_error[j] * 1e3:.4f}", f"{m.rms_error[j] * 1e3:.4f}", f"{m.peak_torque[j]:.4f}"]
-            for j in range(n)]
     text = [f"### {name}", "", description, "",
             f"Communication step {result.info.get('step', float('nan')) * 1e3:g} ms, "
             f"{result.info.get('algorithm', '')}, {len(result.time)} points, "
-            f"wall time {result.info.get('wall_time', float('nan')):.2f} s.", "",
-            markdown_table(rows, ["joint", "max error (mrad)", "RMS error (mrad)", "peak torque (N.m)"]), "",
-            f"TCP error: max {np.max(m.tcp_error) * 1e3:.4f} mm over the task; "
-            + "; ".join(f"{k} at t = {t:g} s: {e * 1e3:.4f} mm" for k, (t, e) in m.events.items()) + "."]
+            f"wall time {result.info.get('wall_time', float('nan')):.2f} s.", "", joint_table(m)]
+    if m.tcp_error is not None:
+        line = f"Task-point error |FK(q) - x_ref|: max {np.max(m.tcp_error) * 1e3:.4f} mm over the run"
+        if m.events:
+            line += "; " + "; ".join(f"{k} at t = {t:g} s: {e * 1e3:.4f} mm" for k, (t, e) in m.events.items())
+        text += ["", line + "."]
+    if m.final_speed is not None:
+        text += ["", "At the end (t = {:g} s): joint speeds {}.".format(
+            result.time[-1], ", ".join(f"{v:.2e}" for v in m.final_speed))]
     return "\n".join(text)

@@ -5,7 +5,7 @@ co-simulated with :class:`~robofmu.system.master.Master` and compared, at its co
 points t_k, with the continuous closed loop of :mod:`robofmu.system.reference` (solved once,
 sampled on every grid):
 
-- ``q_error``: max over k and joints of |q_cosim(t_k) - q_mono(t_k)| (rad);
+- ``q_error``: max over k and joints of |q_cosim(t_k) - q_mono(t_k)| (joint units: rad or m);
 - ``tcp_error``: max over k of ||fk(q_cosim(t_k)) - fk(q_mono(t_k))|| (m);
 - ``tracking``: max over k of ||fk(q_cosim(t_k)) - x_ref(t_k)|| (m), the co-simulated TCP's
   distance to the task-space trajectory (for context: includes the loop's own tracking error,
@@ -25,17 +25,17 @@ acceleration (LSPB blend switches at T/3 are not communication points) is missed
 one step, again O(h). Any further delay of d whole steps adds d h to the effective delay: still
 O(h), with a larger constant.
 
-What the algorithms do (:func:`sampled_loop` replays the Gauss-Seidel loop in-process and
-matches the FMU runs to round-off):
+What the algorithms do (:class:`~robofmu.system.replica.InProcessDiagram` replays the
+Gauss-Seidel loop in-process and matches the FMU runs to the last bit):
 
-- ``gauss-seidel``: at t_k the outputs are evaluated in dependency order (trajectory, ik, plant,
-  controller); inputs from blocks evaluated later (the plant's torque) are set after that pass,
+- ``gauss-seidel``: at t_k the outputs are evaluated in dependency order (reference, IK, plant,
+  controller); inputs from blocks evaluated later (the plant's effort) are set after that pass,
   so the plant integrates [t_k, t_k + h] with tau(t_k): effective delay h / 2.
 - ``jacobi``: every block reads the outputs of the previous exchange: the torque applied over
   [t_k, t_k + h] comes from the plant state at t_(k-1) and the joint reference of t_(k-2) (the
   IK lags the trajectory one step, the controller lags the IK one more). Effective delays
   1.5 h on the state, 2.5 h on the reference: first order, with a larger constant.
-- ``replica`` (no FMUs): the Gauss-Seidel loop with the blocks' logic called directly.
+- ``in-process`` (no FMI calls): the Gauss-Seidel loop with the blocks' logic called directly.
 
 Run ``python -m robofmu.system.convergence --out results/convergence`` for the study.
 """
@@ -50,14 +50,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from robofmu.components.robot import Robot
-
 from .diagram import System
 from .experiment import load
-from .master import ALGORITHMS, Master, Result, step_count
-from .reference import LoopSetup, MonolithicLoop
+from .master import ALGORITHMS, Master, Result
+from .replica import InProcessDiagram
+from .roles import Roles
 
-__all__ = ["DEFAULT_STEPS", "ALGORITHMS", "errors", "observed_order", "run_cosim", "sampled_loop",
+__all__ = ["DEFAULT_STEPS", "ALGORITHMS", "errors", "observed_order", "run_cosim",
            "study", "markdown_table", "plot"]
 
 #: Communication steps of the study (s).
@@ -87,7 +86,7 @@ def observed_order(steps: Sequence[float], errs: Sequence[float]) -> float:
 
 
 def run_cosim(system: System, step: float, algorithm: str, stop_time: float) -> Result:
-    """Co-simulate ``system`` and record the plant's q and the trajectory (nothing else).
+    """Co-simulate ``system`` recording only the signals the study compares (its roles).
 
     Parameters
     ----------
@@ -101,125 +100,54 @@ def run_cosim(system: System, step: float, algorithm: str, stop_time: float) -> 
     Returns
     -------
     Result
-        Columns ``plant.q[i]``, ``plant.qd[i]``, ``trajectory.x_ref[i]``, ``controller.tau[i]``.
+        The vectors of the roles ``q``, ``qd``, ``x_ref`` and ``tau`` the experiment declares.
     """
-    master = Master(system, record=["plant.q[[]*", "plant.qd[[]*", "trajectory.x_ref[[]*",
-                                    "controller.tau[[]*"])
+    roles = Roles.of(system)
+    bases = [b for b in (roles.q, roles.qd, roles.x_ref, roles.tau) if b]
+    master = Master(system, record=[f"{b}[[]*" for b in bases])
     return master.run(stop_time=stop_time, step=step, algorithm=algorithm)
 
 
-def sampled_loop(setup: LoopSetup, step: float, stop_time: float) -> Result:
-    """The Gauss-Seidel loop in one Python process: the blocks' logic without FMI.
-
-    At each t_k = k h the trajectory's outputs at t_k (computed at the end of the previous step,
-    as the FMU does), the IK, the plant's state and the controller's torque (model payload while
-    grip) are recorded; then the integral advances (z += e(t_k) h) and the plant (payload while
-    grip) is integrated over [t_k, t_k + h] by RK4 (sub-steps <= ``setup.max_substep``) with
-    tau(t_k) held. This is what the master does with the FMUs, call for call, so the two agree
-    to the last bit (``benchmarks/loop.py`` checks it and times both).
-
-    Parameters
-    ----------
-    setup : LoopSetup
-    step : float
-        Communication step h (s).
-    stop_time : float
-        End time (s), a whole number of steps.
-
-    Returns
-    -------
-    Result
-        The master's columns, in its order: ``trajectory.x_ref[i]``, ``xd_ref``, ``xdd_ref`` (m,
-        m/s, m/s^2), ``ik.q_ref[j]``, ``qd_ref``, ``qdd_ref``, ``plant.q[j]``, ``plant.qd[j]``,
-        ``controller.tau[j]``, then ``trajectory.grip`` and ``ik.reachable`` (0/1);
-        ``info["wall_time"]`` is the stepping loop's wall time (s).
-    """
-    from robofmu.components.control import ComputedTorque
-    from robofmu.components.ik import make_ik
-    from robofmu.components.plant import Plant
-
-    h = float(step)
-    n_steps = step_count(0.0, stop_time, h)
-    trajectory = setup.trajectory()
-    plant = Plant(Robot(setup.robot, gravity=setup.gravity), setup.q0, setup.qd0,
-                  payload_mass=setup.payload, max_substep=setup.max_substep)
-    model = Robot(setup.robot, gravity=setup.model_gravity)
-    law = ComputedTorque(model, setup.kp, setup.kd, setup.ki)
-    ik = make_ik(Robot(setup.robot), tool_pitch=setup.tool_pitch, elbow=setup.elbow)
-    n, m = plant.n, trajectory.dim
-    columns = ([f"trajectory.{b}[{i}]" for b in ("x_ref", "xd_ref", "xdd_ref") for i in range(1, m + 1)]
-               + [f"ik.{b}[{j}]" for b in ("q_ref", "qd_ref", "qdd_ref") for j in range(1, n + 1)]
-               + [f"plant.{b}[{j}]" for b in ("q", "qd") for j in range(1, n + 1)]
-               + [f"controller.tau[{j}]" for j in range(1, n + 1)] + ["trajectory.grip", "ik.reachable"])
-    cuts = np.cumsum([0, m, m, m, n, n, n, n, n, n])
-    sx, sxd, sxdd, sq_ref, sqd_ref, sqdd_ref, sq, sqd, stau = (slice(a, b) for a, b in zip(cuts, cuts[1:]))
-    times = h * np.arange(n_steps + 1)
-    data = np.empty((n_steps + 1, len(columns)))
-    data[:, -1] = 1.0                                   # reachable: the solve below raises otherwise
-    x, xd, xdd = trajectory.evaluate(times[0])
-    wall = _time.perf_counter()
-    for k, t in enumerate(times):
-        row = data[k]
-        grip = trajectory.grip(t)
-        q_ref, qd_ref, qdd_ref = ik.solve(x, xd, xdd)
-        model.set_payload(setup.model_payload if grip else 0.0)
-        tau = law.torque(q_ref, qd_ref, qdd_ref, plant.q, plant.qd)
-        row[sx], row[sxd], row[sxdd] = x, xd, xdd
-        row[sq_ref], row[sqd_ref], row[sqdd_ref] = q_ref, qd_ref, qdd_ref
-        row[sq], row[sqd], row[stau] = plant.q, plant.qd, tau
-        row[-2] = grip
-        if k == n_steps:
-            break
-        law.advance(q_ref, plant.q, h)
-        plant.set_grip(grip)
-        plant.step(tau, h, t)
-        x, xd, xdd = trajectory.evaluate(t + h)          # the trajectory FMU's outputs at t + h
-    return Result(times, columns, data, {"algorithm": "replica", "step": h,
-                                         "wall_time": _time.perf_counter() - wall})
-
-
-def errors(result: Result, loop: MonolithicLoop, robot: Robot | None = None) -> dict[str, float]:
-    """Errors of a co-simulation run against the solved monolithic loop, at its time points.
+def errors(result: Result, reference: Result, roles: Roles, model=None) -> dict[str, float]:
+    """Errors of a co-simulation run against the monolithic reference at the same times.
 
     Parameters
     ----------
     result : Result
-        A co-simulation run recording ``plant.q`` (and ``trajectory.x_ref`` for ``tracking``).
-    loop : MonolithicLoop
-        Solved up to at least the run's last time.
-    robot : Robot, optional
-        For forward kinematics (default: the loop's robot, no payload).
+        A co-simulation run recording the ``q`` role (and ``qd``, ``x_ref`` where declared).
+    reference : Result
+        The monolithic reference evaluated at ``result.time``.
+    roles : Roles
+    model : RobotModel, optional
+        For forward kinematics (default: a new model of the experiment's robot).
 
     Returns
     -------
     dict
-        ``q_error`` (rad), ``qd_error`` (rad/s), ``tcp_error`` (m), ``tracking`` (m, NaN if
-        ``trajectory.x_ref`` was not recorded), ``q_error_at`` (s, where q_error occurs).
+        ``q_error`` (joint units), ``qd_error``, ``tcp_error`` (task units), ``tracking``
+        (distance of the co-simulated task point to ``x_ref``; NaN without that role),
+        ``q_error_at`` (s, where q_error occurs).
     """
-    robot = Robot(loop.setup.robot) if robot is None else robot
-    ref = loop.evaluate(result.time, outputs=False)
-    q = result.vector("plant.q")
-    dq = np.abs(q - ref["q"])
+    model = roles.model() if model is None else model
+    q, q_mono = result.vector(roles.q), reference.vector(roles.q)
+    dq = np.abs(q - q_mono)
     k = int(np.argmax(dq.max(axis=1)))
-    tcp = np.array([robot.fk(v) for v in q])
-    tcp_ref = np.array([robot.fk(v) for v in ref["q"]])
+    tcp = np.array([model.fk(v) for v in q])
+    tcp_mono = np.array([model.fk(v) for v in q_mono])
     out = {"q_error": float(dq.max()), "q_error_at": float(result.time[k]),
-           "tcp_error": float(np.linalg.norm(tcp - tcp_ref, axis=1).max()),
+           "tcp_error": float(np.linalg.norm(tcp - tcp_mono, axis=1).max()),
            "tracking": math.nan, "qd_error": math.nan}
-    try:
-        out["qd_error"] = float(np.abs(result.vector("plant.qd") - ref["qd"]).max())
-    except KeyError:
-        pass
-    try:
-        out["tracking"] = float(np.linalg.norm(tcp - result.vector("trajectory.x_ref"), axis=1).max())
-    except KeyError:
-        pass
+    if roles.qd is not None:
+        out["qd_error"] = float(np.abs(result.vector(roles.qd) - reference.vector(roles.qd)).max())
+    tracking = roles.tcp_error(result, model)
+    if tracking is not None:
+        out["tracking"] = float(tracking.max())
     return out
 
 
 def markdown_table(rows: list[dict], orders: dict) -> str:
     """The study's rows as a markdown table, then the observed orders."""
-    lines = ["| algorithm | h (ms) | max abs q error (rad) | max TCP error (mm) | local order (q) "
+    lines = ["| algorithm | h (ms) | max abs q error (rad or m) | max TCP error (mm) | local order (q) "
              "| TCP tracking error vs x_ref (mm) | wall time (s) |",
              "|---|---:|---:|---:|---:|---:|---:|"]
     prev = {}
@@ -235,7 +163,7 @@ def markdown_table(rows: list[dict], orders: dict) -> str:
     lines.append("")
     for a, o in orders.items():
         lines.append(f"- {a}: observed order {o['q']:.2f} (q), {o['tcp']:.2f} (TCP); "
-                     f"error constant C = {o['C_q']:.3g} rad/s (q error ~ C h)")
+                     f"error constant C = {o['C_q']:.3g} per s (q error ~ C h, joint units)")
     for a, o in orders.items():
         if "ratio_to_gs" in o:
             lines.append(f"- {a} / gauss-seidel q error ratio (mean over steps): {o['ratio_to_gs']:.2f}")
@@ -252,7 +180,7 @@ def plot(rows: list[dict], path: str | Path, title: str = "") -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
-    for ax, key, scale, label in ((axes[0], "q_error", 1.0, "max |q - q_ref| (rad)"),
+    for ax, key, scale, label in ((axes[0], "q_error", 1.0, "max |q - q_mono| (rad or m)"),
                                   (axes[1], "tcp_error", 1e3, "max TCP error (mm)")):
         names = list(dict.fromkeys(r["algorithm"] for r in rows))
         for a, marker in zip(names, ("o", "s", "^", "v", "D")):
@@ -277,7 +205,7 @@ def plot(rows: list[dict], path: str | Path, title: str = "") -> Path:
     return path
 
 
-def study(experiment: str | System = "chess-pd", steps: Sequence[float] = DEFAULT_STEPS,
+def study(experiment: str | System, steps: Sequence[float] = DEFAULT_STEPS,
           out_dir: str | Path | None = None, algorithms: Sequence[str] = ALGORITHMS,
           stop_time: float | None = None, fmu_dir: str | Path | None = "fmus",
           progress: Callable[[str], None] | None = print) -> dict:
@@ -293,10 +221,10 @@ def study(experiment: str | System = "chess-pd", steps: Sequence[float] = DEFAUL
         Folder for ``convergence.md`` (the table), ``convergence.png`` (log-log figure) and
         ``convergence.json`` (every number). Nothing is written if None.
     algorithms : sequence of str
-        Master algorithms to compare ("gauss-seidel", "jacobi"); "replica" adds the sampled
-        loop run in-process with the intended Gauss-Seidel semantics (:func:`sampled_loop`).
+        Master algorithms to compare ("gauss-seidel", "jacobi"); "in-process" adds the
+        Gauss-Seidel loop run in-process on the blocks' logic (no FMI calls).
     stop_time : float, optional
-        End of every run (s); default the experiment's (13 s for the chess task).
+        End of every run (s); default the experiment's.
     fmu_dir : str or Path
         FMU root when ``experiment`` is a name.
     progress : callable, optional
@@ -318,9 +246,9 @@ def study(experiment: str | System = "chess-pd", steps: Sequence[float] = DEFAUL
     stop_time = system.stop_time if stop_time is None else float(stop_time)
     steps = sorted((float(h) for h in steps), reverse=True)
     algorithms = list(algorithms)
-    unknown = [a for a in algorithms if a not in ALGORITHMS + ("replica",)]
+    unknown = [a for a in algorithms if a not in ALGORITHMS + ("in-process",)]
     if unknown:
-        raise ValueError(f"algorithms: unknown {unknown}; choose from {', '.join(ALGORITHMS)}, replica")
+        raise ValueError(f"algorithms: unknown {unknown}; choose from {', '.join(ALGORITHMS)}, in-process")
     if len(steps) < 2:
         raise ValueError("steps: need at least two communication steps")
     for h in steps:
@@ -328,23 +256,26 @@ def study(experiment: str | System = "chess-pd", steps: Sequence[float] = DEFAUL
         if abs(n * h - stop_time) > 1e-9 * max(1.0, stop_time):
             raise ValueError(f"steps: stop time {stop_time} s is not a whole number of {h} s steps")
 
-    loop = MonolithicLoop(LoopSetup.from_system(system)).solve(stop_time)
-    say(f"reference: {system.name}, 0..{stop_time:g} s, DOP853 rtol {loop.rtol:g} on "
+    roles = Roles.of(system)
+    roles.require("q")
+    diagram = InProcessDiagram(system)
+    loop = diagram.monolithic(stop_time)
+    say(f"reference: {system.name}, 0..{stop_time:g} s, DOP853 rtol 1e-10 on "
         f"{loop.stats['pieces']} pieces, {loop.stats['nfev']} evaluations, "
         f"{loop.stats['wall_time']:.1f} s")
-    robot = Robot(loop.setup.robot)
+    model = roles.model()
     rows, total = [], len(steps) * len(algorithms)
     for a in algorithms:
         for h in steps:
             t0 = _time.perf_counter()
-            if a == "replica":
-                result = sampled_loop(loop.setup, h, stop_time)
+            if a == "in-process":
+                result = diagram.sampled(h, stop_time)
             else:
                 result = run_cosim(system, h, a, stop_time)
-            row = {"algorithm": a, "step": h, **errors(result, loop, robot)}
+            row = {"algorithm": a, "step": h, **errors(result, loop.evaluate(result.time), roles, model)}
             row["wall_time"] = _time.perf_counter() - t0
             rows.append(row)
-            say(f"[{len(rows)}/{total}] {a:12s} h = {h * 1e3:6.3g} ms: max |dq| {row['q_error']:.3e} rad "
+            say(f"[{len(rows)}/{total}] {a:12s} h = {h * 1e3:6.3g} ms: max |dq| {row['q_error']:.3e} "
                 f"(t = {row['q_error_at']:.3f} s), TCP {row['tcp_error'] * 1e3:.4f} mm, "
                 f"tracking {row['tracking'] * 1e3:.4f} mm  [{row['wall_time']:.1f} s]")
 
@@ -386,14 +317,14 @@ def study(experiment: str | System = "chess-pd", steps: Sequence[float] = DEFAUL
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m robofmu.system.convergence",
                                 description="co-simulation error vs communication step")
-    p.add_argument("--experiment", default="chess-pd")
+    p.add_argument("--experiment", required=True)
     p.add_argument("--steps", default=",".join(f"{h:g}" for h in DEFAULT_STEPS),
                    help="communication steps in s, comma-separated")
     p.add_argument("--stop-time", type=float, default=None)
     p.add_argument("--fmu-dir", default="fmus")
     p.add_argument("--out", default="results/convergence")
-    p.add_argument("--algorithms", default="gauss-seidel,jacobi,replica",
-                   help="comma-separated: gauss-seidel, jacobi, replica (in-process, no FMUs)")
+    p.add_argument("--algorithms", default="gauss-seidel,jacobi,in-process",
+                   help="comma-separated: gauss-seidel, jacobi, in-process (no FMI calls)")
     a = p.parse_args(argv)
     res = study(a.experiment, [float(s) for s in a.steps.split(",")], a.out,
                 algorithms=a.algorithms.split(","), stop_time=a.stop_time, fmu_dir=a.fmu_dir)

@@ -1,27 +1,39 @@
 """Named experiments: declarative TOML files under ``system/experiments/``.
 
-An experiment file either describes a whole diagram (blocks, connections, timing) or names a
-``base`` diagram and sets block parameters (``[parameters.<block>]``). A string parameter value
-``"robot:gains.pid.kp"`` is read from the robot's description, so the seed's gains and the pawn's
-mass live in one place.
+An experiment file either describes a whole diagram (blocks, connections, timing, the robot and
+the signal roles) or names a ``base`` diagram and sets block parameters
+(``[parameters.<block>]``). A string parameter value ``"robot:gains.pid.kp"`` is read from the
+robot's typed description (``gains.pid.kp``, ``payload.mass``, ``configurations.home``), so
+the seed's gains and the pawn's mass live in one place.
+
+``[roles]`` names the signals analysis and plots need, by what they mean: ``q`` (measured joint
+positions), ``q_ref`` (joint reference), ``tau`` (joint efforts), and where the diagram has them
+``x_ref`` (task reference) and ``grip`` (gripper). Nothing else in ``system/`` knows instance
+names.
 """
 from __future__ import annotations
 
 import tomllib
 from pathlib import Path
 
-from robofmu.components.robot import load_spec
+from robofmu.components.robots import load_description
 
 from .diagram import System
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 
 
+#: Roles an experiment may name, and what each means.
+ROLES = {"q": "measured joint positions", "qd": "measured joint velocities",
+         "q_ref": "joint position reference", "tau": "joint efforts",
+         "x_ref": "task-space reference", "grip": "gripper closed"}
+
+
 def available() -> list[str]:
-    """Names of the runnable experiments (diagram-only bases excluded)."""
+    """Names of the runnable experiments (bases that only hold a diagram are excluded)."""
     names = []
     for p in sorted(EXPERIMENTS_DIR.glob("*.toml")):
-        if "base" in tomllib.loads(p.read_text()):
+        if not tomllib.loads(p.read_text()).get("abstract", False):
             names.append(p.stem)
     return names
 
@@ -40,11 +52,18 @@ def _resolve(value, robot: str | None, where: str):
     if isinstance(value, str) and value.startswith("robot:"):
         if robot is None:
             raise ValueError(f"{where}: {value!r} needs a `robot` in the experiment")
-        node = load_spec(robot).raw
+        node = load_description(robot)
         for key in value[len("robot:"):].split("."):
-            if not isinstance(node, dict) or key not in node:
+            if isinstance(node, dict) and key in node:
+                node = node[key]
+            elif not isinstance(node, dict) and not key.startswith("_") and hasattr(node, key):
+                node = getattr(node, key)
+            else:
                 raise ValueError(f"{where}: {value!r}: robot {robot!r} has no {key!r}")
-            node = node[key]
+        if isinstance(node, tuple):
+            return list(node)
+        if not isinstance(node, (int, float, str, list)):
+            raise ValueError(f"{where}: {value!r} names a table of robot {robot!r}, not a value")
         return node
     return value
 
@@ -67,6 +86,13 @@ def load(name_or_path: str | Path, fmu_dir: str | Path | None = None) -> System:
         merged["blocks"] = blocks
         data = merged
     robot = data.get("robot")
+    if robot is not None:
+        load_description(robot)          # an unknown robot fails here, naming the known ones
+    roles = data.get("roles", {})
+    unknown = sorted(set(roles) - set(ROLES))
+    if unknown:
+        raise ValueError(f"{path}: roles: unknown role {unknown[0]!r} (known: {', '.join(ROLES)})")
+    data.pop("abstract", None)
     for b in data["blocks"]:
         b["parameters"] = {k: _resolve(v, robot, f"{path.name}: {b['name']}.{k}")
                            for k, v in b.get("parameters", {}).items()}

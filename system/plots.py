@@ -1,4 +1,6 @@
-"""Figures of a run (after seed 002's Figures 2-11) and the block diagram of a System."""
+"""Figures of a run of any robot (after seed 002's Figures 2-11) and the block diagram of a System.
+
+Signals come by role, axis units from the recorded FMUs' model descriptions."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,9 +13,11 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import FancyArrowPatch, FancyBboxPatch  # noqa: E402
 
 from .diagram import System  # noqa: E402
-from .master import Result  # noqa: E402
+from .result import Result  # noqa: E402
+from .roles import Roles  # noqa: E402
+from .units import printed, small  # noqa: E402
 
-COLORS = ["tab:red", "tab:green", "tab:blue", "k"]
+COLORS = ["tab:red", "tab:green", "tab:blue", "k", "tab:orange", "tab:purple"]
 
 
 def _save(fig, path: Path) -> Path:
@@ -24,23 +28,29 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def _grip_spans(ax, result: Result):
-    if "trajectory.grip" in result.columns:
-        g = result["trajectory.grip"] > 0.5
+def _grip_spans(ax, result: Result, roles: Roles):
+    """Shade the interval while the gripper is closed (where the run has a ``grip`` role)."""
+    if roles.grip and roles.grip in result.columns:
+        g = result[roles.grip] > 0.5
         if g.any():
             t = result.time[g]
-            ax.axvspan(t[0], t[-1], color="0.9", zorder=0, label="pawn carried")
+            ax.axvspan(t[0], t[-1], color="0.9", zorder=0, label="payload carried")
 
 
-def _profile(result: Result, path: Path, bases: list[str], units: list[str], labels: list[str],
-             title: str) -> Path:
-    """Position, velocity and acceleration of a vector signal, one panel each."""
+def _unit(result: Result, base: str, fallback: str = "") -> str:
+    """The printed unit of a recorded vector's first element (its elements share it)."""
+    return printed(result.units.get(f"{base}[1]", fallback))
+
+
+def _profile(result: Result, path: Path, bases: list[str], labels: list[str], title: str) -> Path:
+    """Position, velocity and acceleration of a vector signal, one panel each; units from the run."""
     fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
-    for ax, base, unit, kind in zip(axes, bases, units, ("position", "velocity", "acceleration")):
+    for ax, base, kind in zip(axes, bases, ("position", "velocity", "acceleration")):
         v = result.vector(base)
+        units = {printed(result.units.get(f"{base}[{i + 1}]")) for i in range(v.shape[1])}
         for i, label in enumerate(labels):
-            ax.plot(result.time, v[:, i], color=COLORS[i % 4], label=label)
-        ax.set_ylabel(f"{kind} ({unit})")
+            ax.plot(result.time, v[:, i], color=COLORS[i % len(COLORS)], label=label)
+        ax.set_ylabel(f"{kind} ({', '.join(sorted(u for u in units if u))})")
         ax.grid(alpha=0.3)
     axes[0].legend(ncol=len(labels), loc="upper right")
     axes[0].set_title(title)
@@ -48,77 +58,88 @@ def _profile(result: Result, path: Path, bases: list[str], units: list[str], lab
     return _save(fig, path)
 
 
-def cartesian_reference(result: Result, path: Path) -> Path:
-    """Seed Fig. 2: TCP reference position, velocity and acceleration."""
-    return _profile(result, path, ["trajectory.x_ref", "trajectory.xd_ref", "trajectory.xdd_ref"],
-                    ["m", "m/s", "m/s²"], list("xyz"),
-                    "TCP reference: LSPB moves through the waypoints (queen's gambit)")
+def task_reference(result: Result, roles: Roles, path: Path) -> Path:
+    """Seed 002 Fig. 2: the task-space reference position, velocity and acceleration."""
+    roles.require("x_ref")
+    base = roles.x_ref
+    instance = base.split(".")[0]
+    names = [f"{instance}.{b}" for b in ("x_ref", "xd_ref", "xdd_ref")]
+    coordinates = roles.model().task_coordinates
+    return _profile(result, path, names, list(coordinates), "Task-space reference")
 
 
-def joint_reference(result: Result, path: Path) -> Path:
-    """Seed Fig. 3: joint references from the IK block."""
-    n = result.vector("ik.q_ref").shape[1]
-    return _profile(result, path, ["ik.q_ref", "ik.qd_ref", "ik.qdd_ref"], ["rad", "rad/s", "rad/s²"],
-                    [f"θ{j + 1}" for j in range(n)], "Joint-space reference (closed-form IK, analytic rates)")
+def joint_reference(result: Result, roles: Roles, path: Path) -> Path:
+    """Seed 002 Fig. 3: the joint reference (position, velocity, acceleration)."""
+    roles.require("q_ref")
+    instance = roles.q_ref.split(".")[0]
+    names = [f"{instance}.{b}" for b in ("q_ref", "qd_ref", "qdd_ref")]
+    n = result.vector(roles.q_ref).shape[1]
+    return _profile(result, path, names, [f"q{j + 1}" for j in range(n)], "Joint-space reference")
 
 
-def tracking(result: Result, path: Path, title: str) -> Path:
-    """Seed Figs. 7 and 9: each joint angle against its reference, and the error."""
-    q, q_ref = result.vector("plant.q"), result.vector("ik.q_ref")
+def tracking(result: Result, roles: Roles, path: Path, title: str) -> Path:
+    """Seed 002 Figs. 7 and 9: each joint against its reference, and the error."""
+    q, q_ref = roles.vector(result, "q"), roles.vector(result, "q_ref")
     n = q.shape[1]
-    fig, axes = plt.subplots(n, 2, figsize=(11, 2.2 * n), sharex=True)
+    fig, axes = plt.subplots(n, 2, figsize=(11, 2.2 * n), sharex=True, squeeze=False)
     for j in range(n):
+        unit = result.units.get(f"{roles.q}[{j + 1}]")
+        factor, small_unit = small(unit)
         ax = axes[j, 0]
         ax.plot(result.time, q_ref[:, j], color="0.5", lw=3, label="reference")
-        ax.plot(result.time, q[:, j], color=COLORS[j % 4], lw=1, label="joint")
-        ax.set_ylabel(f"θ{j + 1} (rad)")
+        ax.plot(result.time, q[:, j], color=COLORS[j % len(COLORS)], lw=1, label="joint")
+        ax.set_ylabel(f"q{j + 1} ({printed(unit)})")
         ax.grid(alpha=0.3)
         ax = axes[j, 1]
-        _grip_spans(ax, result)
-        ax.plot(result.time, (q_ref[:, j] - q[:, j]) * 1e3, color=COLORS[j % 4])
-        ax.set_ylabel(f"e{j + 1} (mrad)")
+        _grip_spans(ax, result, roles)
+        ax.plot(result.time, (q_ref[:, j] - q[:, j]) * factor, color=COLORS[j % len(COLORS)])
+        ax.set_ylabel(f"e{j + 1} ({small_unit})")
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="upper right")
-    axes[0, 0].set_title(f"{title}: joint angle and reference")
-    axes[0, 1].set_title("tracking error (grey: pawn carried)")
+    axes[0, 0].set_title(f"{title}: joint position and reference")
+    axes[0, 1].set_title("tracking error" + (" (grey: payload carried)" if roles.grip else ""))
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("time (s)")
     return _save(fig, path)
 
 
-def torques(result: Result, path: Path, title: str) -> Path:
-    """Seed Figs. 8 and 10: joint torques."""
-    tau = result.vector("controller.tau")
-    fig, ax = plt.subplots(figsize=(8, 4))
-    _grip_spans(ax, result)
-    for j in range(tau.shape[1]):
-        ax.plot(result.time, tau[:, j], color=COLORS[j % 4], label=f"τ{j + 1}")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("torque (N·m)")
-    ax.set_title(f"{title}: joint torques")
-    ax.legend(ncol=5, loc="upper right")
-    ax.grid(alpha=0.3)
+def efforts(result: Result, roles: Roles, path: Path, title: str) -> Path:
+    """Seed 002 Figs. 8 and 10: joint efforts, one panel per unit (torques N·m, forces N)."""
+    tau = roles.vector(result, "tau")
+    units = [printed(result.units.get(f"{roles.tau}[{j + 1}]")) for j in range(tau.shape[1])]
+    groups = list(dict.fromkeys(units))
+    fig, axes = plt.subplots(len(groups), 1, figsize=(8, 3.2 * len(groups)), sharex=True, squeeze=False)
+    for ax, unit in zip(axes[:, 0], groups):
+        _grip_spans(ax, result, roles)
+        for j in (j for j, u in enumerate(units) if u == unit):
+            ax.plot(result.time, tau[:, j], color=COLORS[j % len(COLORS)], label=f"τ{j + 1}")
+        ax.set_ylabel(f"{'torque' if unit == 'N·m' else 'force' if unit == 'N' else 'effort'} ({unit})")
+        ax.legend(ncol=5, loc="upper right")
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_title(f"{title}: joint efforts")
+    axes[-1, 0].set_xlabel("time (s)")
     return _save(fig, path)
 
 
-def error_comparison(results: dict[str, Result], path: Path, joint: int | None = None) -> Path:
-    """Seed Fig. 11: tracking error of several runs (PD vs PID, pawn known or not)."""
+def error_comparison(results: dict[str, Result], roles: Roles, path: Path, title: str) -> Path:
+    """Seed 002 Fig. 11: the tracking error of several runs of one diagram, per joint."""
     first = next(iter(results.values()))
-    n = first.vector("plant.q").shape[1]
-    joints = range(n) if joint is None else [joint]
-    fig, axes = plt.subplots(len(joints), 1, figsize=(9, 2.3 * len(joints)), sharex=True, squeeze=False)
-    for row, j in enumerate(joints):
-        ax = axes[row, 0]
-        _grip_spans(ax, first)
-        for name, r in results.items():
-            e = r.vector("ik.q_ref")[:, j] - r.vector("plant.q")[:, j]
-            ax.plot(r.time, e * 1e3, "--" if "unknown" in name else "-",
-                    color="tab:red" if "pid" in name else "tab:blue", lw=1, label=name)
-        ax.set_ylabel(f"e{j + 1} (mrad)")
+    n = roles.vector(first, "q").shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(9, 2.3 * n), sharex=True, squeeze=False)
+    styles = ["-", "--", "-.", ":"]
+    for j in range(n):
+        ax = axes[j, 0]
+        factor, unit = small(first.units.get(f"{roles.q}[{j + 1}]"))
+        _grip_spans(ax, first, roles)
+        for k, (name, r) in enumerate(results.items()):
+            e = roles.vector(r, "q_ref")[:, j] - roles.vector(r, "q")[:, j]
+            ax.plot(r.time, e * factor, styles[k // len(COLORS) % len(styles)],
+                    color=COLORS[k % len(COLORS)], lw=1, label=name)
+        ax.set_ylabel(f"e{j + 1} ({unit})")
         ax.grid(alpha=0.3)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     axes[-1, 0].legend(handles, labels, ncol=3, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.35))
-    axes[0, 0].set_title("Tracking error: PD (blue) vs PID (red); dashed: pawn unknown to the model")
+    axes[0, 0].set_title(title)
     axes[-1, 0].set_xlabel("time (s)")
     return _save(fig, path)
 
@@ -130,8 +151,8 @@ def tcp_error(results: dict[str, tuple[np.ndarray, np.ndarray]], path: Path) -> 
         ax.semilogy(t, np.maximum(err, 1e-12) * 1e3, lw=1, label=name)
     ax.axhline(1.0, color="0.3", ls=":", label="1 mm")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("TCP error (mm)")
-    ax.set_title("Tool-point error against the Cartesian reference")
+    ax.set_ylabel("task-point error (mm)")
+    ax.set_title("Task-point error |FK(q) - x_ref| against the reference")
     ax.legend(fontsize=8, ncol=3)
     ax.grid(alpha=0.3, which="both")
     return _save(fig, path)
@@ -152,10 +173,10 @@ def block_diagram(system: System, path: Path, order: list[str] | None = None) ->
                                     fc="#e8f0fb", ec="#2b5797", lw=1.5))
         ax.text(x, 0.5, b.name, ha="center", va="center", fontsize=12, weight="bold")
         ax.text(x, 0.2, Path(str(b.fmu)).name, ha="center", va="center", fontsize=7, color="0.3")
-        params = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else k for k, v in b.parameters.items())
+        params = [f"{k} = {v:g}" if isinstance(v, (int, float)) else k for k, v in b.parameters.items()]
         if params:
-            ax.text(x, -0.05, params.replace(", payload", ",\npayload"), ha="center", va="top",
-                    fontsize=6.5, color="0.3", wrap=True)
+            lines = [", ".join(params[i:i + 2]) for i in range(0, len(params), 2)]
+            ax.text(x, -0.05, "\n".join(lines), ha="center", va="top", fontsize=6.5, color="0.3")
     pairs: dict[tuple[str, str], list[str]] = {}
     for wire in system.wires:
         pairs.setdefault((wire.src, wire.dst), []).append(wire.src_var)

@@ -6,11 +6,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from robofmu.components.robot import Robot, load_spec
-
 from . import analysis, experiment, plots
 from .master import Master, Result
-from .reference import LoopSetup
+from .roles import Roles
 
 
 def progress_printer(label: str, stream=sys.stderr):
@@ -34,9 +32,21 @@ def progress_printer(label: str, stream=sys.stderr):
 class Run:
     name: str
     result: Result
+    roles: Roles
     metrics: analysis.Tracking
     section: str
     figures: list[Path]
+
+
+def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]) -> list[Path]:
+    """The figures of one run: block diagram, references, tracking, efforts."""
+    made = [plots.block_diagram(system, out / "block_diagram.png", order)]
+    if roles.x_ref:
+        made.append(plots.task_reference(result, roles, out / "task_reference.png"))
+    made += [plots.joint_reference(result, roles, out / "joint_reference.png"),
+             plots.tracking(result, roles, out / "tracking.png", system.name),
+             plots.efforts(result, roles, out / "efforts.png", system.name)]
+    return made
 
 
 def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus", step: float | None = None,
@@ -49,24 +59,14 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     system = experiment.load(name, fmu_dir=fmu_dir)
-    master = Master(system, progress=progress_printer(name) if progress else None)
+    roles = Roles.of(system)
+    master = Master(system, progress=progress_printer(system.name) if progress else None)
     for w in master.check():
         print(f"warning: {w}", file=sys.stderr)
     result = master.run(stop_time=stop_time, step=step, algorithm=algorithm, csv_path=out / "results.csv")
-    robot_name = system.extra.get("robot", "chess")
-    spec = load_spec(robot_name)
-    events = analysis.grip_events(LoopSetup.from_system(system).trajectory())
-    metrics = analysis.tracking(result, Robot(spec), events)
-    section = analysis.tracking_report(name, system.description, metrics, result)
-    made = []
-    if figures:
-        made = [
-            plots.block_diagram(system, out / "block_diagram.png", master.order),
-            plots.cartesian_reference(result, out / "cartesian_reference.png"),
-            plots.joint_reference(result, out / "joint_reference.png"),
-            plots.tracking(result, out / "tracking.png", name),
-            plots.torques(result, out / "torques.png", name),
-        ]
-    (out / "report.md").write_text(f"# {name}\n\n" + section + "\n\n"
+    metrics = analysis.tracking(result, roles)
+    section = analysis.tracking_report(system.name, system.description, metrics, result)
+    made = figures_of(system, result, roles, out, master.order) if figures else []
+    (out / "report.md").write_text(f"# {system.name}\n\n" + section + "\n\n"
                                    + "\n".join(f"![{p.stem}]({p.name})" for p in made) + "\n")
-    return Run(name, result, metrics, section, made)
+    return Run(system.name, result, roles, metrics, section, made)

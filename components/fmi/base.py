@@ -1,17 +1,18 @@
-"""The common pythonfmu slave of every robofmu block.
+"""The one pythonfmu slave of every robofmu block: a thin FMI wrapper over an FMI-free block.
 
-A block declares its variables (name, causality, SI unit, description, the inputs an output
-depends on) and implements three hooks:
+The generated script of each FMU names the robot and the block kind; the slave builds that
+block (:mod:`robofmu.components.blocks`) for the robot, registers its declared variables with
+pythonfmu in declaration order (so a value reference is the block's slot in
+:attr:`Block.values`, and a batched fmi2GetReal/fmi2SetReal is one NumPy indexing operation),
+and maps the FMI life cycle onto the block's hooks:
 
-- ``initialize()``: read and validate parameters (raise ValueError naming the parameter), build
-  the FMI-free logic, compute the outputs at the start time;
-- ``evaluate()``: direct-feedthrough blocks only: outputs from the current inputs;
-- ``step(t, h)``: advance internal state from t to t + h and set the outputs at t + h.
+- fmi2ExitInitializationMode -> ``configure()`` (invalid parameters fail naming the parameter);
+- reading outputs -> ``output(t)``, lazily, whenever inputs or time changed;
+- fmi2DoStep(t, h) -> ``advance(t, h)``; outputs then belong to t + h.
 
-All Real values live in one float array indexed by value reference, so that a batched
-fmi2GetReal/fmi2SetReal is one NumPy indexing operation. The base completes the model
-description pythonfmu writes (units, InitialUnknowns, output dependencies), turns exceptions
-into logged errors, and saves the full internal state for fmi2GetFMUstate/fmi2SetFMUstate.
+It completes the model description pythonfmu writes (units, InitialUnknowns, output
+dependencies, a robofmu vendor annotation naming robot and block), turns exceptions into logged
+errors, and saves the full internal state for fmi2GetFMUstate/fmi2SetFMUstate.
 """
 from __future__ import annotations
 
@@ -19,7 +20,6 @@ import ctypes
 import math
 import sys
 import traceback
-from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement
 
 import numpy as np
@@ -28,8 +28,8 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
 
 from .. import SOURCE_HASH, check_bundle
-from ..robot import load_spec
-from ..trajectory import WaypointTrajectory
+from ..blocks import StepRefused, block_type
+from ..robots import load_description, load_model
 
 #: SI base-unit exponents of every unit a block may use (FMI 2.0 UnitDefinitions).
 UNITS = {
@@ -49,26 +49,13 @@ UNITS = {
     "1/s3": {"s": -3},
 }
 
-#: A coordinate's unit -> the units of it and its first two time derivatives.
-DERIVATIVE_UNITS = {"m": ("m", "m/s", "m/s2"), "rad": ("rad", "rad/s", "rad/s2")}
+#: Tool name of the vendor annotation that tells robot and block kind of a FMU.
+VENDOR_TOOL = "robofmu"
 
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
 _VARIABILITY = {v.name: v for v in Fmi2Variability}
 _INITIAL = {i.name: i for i in Fmi2Initial}
-
-
-@dataclass
-class Var:
-    """What the model description says of one variable, beyond pythonfmu's attributes."""
-
-    name: str
-    vr: int
-    kind: str                      # Real, Boolean, Integer, String
-    causality: str
-    unit: str | None = None
-    depends: list[str] | None = None   # outputs: the inputs they depend on (None: not declared)
-    initial_depends: list[str] | None = None  # outputs: knowns they depend on at initialization
-    description: str = ""
+_PYTHONFMU_TYPES = {"Real": Real, "Boolean": Boolean, "Integer": Integer, "String": String}
 
 
 def _balance_pythonfmu_refcount(cls) -> None:
@@ -84,149 +71,93 @@ def _balance_pythonfmu_refcount(cls) -> None:
 
 
 class BlockSlave(Fmi2Slave):
-    """Base of every robofmu block FMU; subclasses set ``block`` and the script sets ``robot_name``."""
+    """The FMU of one block of one robot; the generated script sets ``robot_name`` and ``block_kind``."""
 
     robot_name: str = ""
-    block: str = ""
-    feedthrough: bool = False
-    summary: str = ""
+    block_kind: str = ""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         _balance_pythonfmu_refcount(type(self))
         if self.resources:
             check_bundle(self.resources)
-        if not self.robot_name:
-            raise TypeError(f"{type(self).__name__}: robot_name is not set")
-        self.spec = load_spec(self.robot_name)
+        if not self.robot_name or not self.block_kind:
+            raise TypeError(f"{type(self).__name__}: robot_name and block_kind must be set")
+        description = load_description(self.robot_name)
+        self.logic = block_type(description, self.block_kind)(load_model(description))
+        self.logic.logger = self._log_from_block
         self.author = "robofmu"
         self.version = f"0.1.0+{SOURCE_HASH[:12]}"
-        self.description = f"robofmu {self.block} block of robot '{self.robot_name}': {self.summary}"
-        scenario_end = WaypointTrajectory.from_scenario(self.spec.scenario).duration if self.spec.scenario else None
-        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=scenario_end, step_size=1e-3)
-        self.meta: dict[str, Var] = {}
-        self._starts: list[float] = []
-        self._kinds: list[str] = []
-        self._causalities: list[str] = []
-        self.other: dict[str, object] = {}   # non-Real values by name
+        self.description = f"robofmu {self.block_kind} block of robot '{self.robot_name}': {self.logic.summary}"
+        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=self.logic.nominal_stop_time(),
+                                                    step_size=1e-3)
         self.time = 0.0
         self._dirty = True
         self._initialized = False
         self._held_warned = False
-        self.declare()
-        n = len(self._starts)
-        self.r = np.array(self._starts, dtype=float)
-        kinds = np.array(self._kinds)
-        caus = np.array(self._causalities)
+        for var in self.logic.variables:
+            self._register(var)
+        self.values = self.logic.values
+        kinds = np.array([v.kind for v in self.logic.variables])
+        causalities = np.array([v.causality for v in self.logic.variables])
         self._real = kinds == "Real"
-        self._input_real = self._real & (caus == "input")          # settable once initialized
-        self._settable_real = self._input_real | (self._real & (caus == "parameter"))
+        self._input_real = self._real & (causalities == "input")      # settable once initialized
+        self._settable_real = self._input_real | (self._real & (causalities == "parameter"))
         self._input_vrs = np.flatnonzero(self._input_real)
         self._input_mask = self._input_real.astype(float)
         self._indices: dict[tuple, np.ndarray] = {}
-        self._names = [None] * n
-        for v in self.meta.values():
-            self._names[v.vr] = v.name
+        self._names = [v.name for v in self.logic.variables]
 
-    # -- declaration helpers -------------------------------------------------------------------
-    def declare(self) -> None:  # pragma: no cover - every block overrides it
-        raise NotImplementedError
-
-    def _register(self, var, kind: str, causality: str, start, unit, description, depends,
-                  initial_depends=None):
-        self.register_variable(var)
-        vr = var.value_reference
-        self.meta[var.name] = Var(var.name, vr, kind, causality, unit, depends, initial_depends,
-                                  description)
-        self._starts.append(float(start) if kind == "Real" else 0.0)
-        self._kinds.append(kind)
-        self._causalities.append(causality)
-        return vr
-
-    def real(self, name: str, causality: str, unit: str, description: str, start: float = 0.0,
-             depends: list[str] | None = None, initial_depends: list[str] | None = None) -> int:
-        """Declare a Real; returns its value reference."""
-        if unit not in UNITS:
-            raise KeyError(f"unit {unit!r} missing from UNITS")
-        vr_next = len(self.vars)
-        getter = lambda vr=vr_next: float(self.r[vr])
+    # -- variables --------------------------------------------------------------------------------
+    def _register(self, v) -> None:
+        """Register one declared variable with pythonfmu; its value reference is its slot."""
+        slot = len(self.vars)
+        if self.logic.variables[slot] is not v:
+            raise TypeError(f"{v.name}: value reference {slot} is not its slot")
+        values, settings = self.logic.values, self.logic.settings
         setter = None
-        if causality in ("input", "parameter"):
-            def setter(value, vr=vr_next):
-                self.r[vr] = value
-                self._dirty = True
-        variability = "fixed" if causality == "parameter" else "continuous"
-        initial = None
-        if causality == "parameter":
-            initial = "exact"
-        elif causality == "output":
-            initial = "calculated"
-        var = Real(name, causality=_CAUSALITY[causality], description=description,
-                   variability=_VARIABILITY[variability],
-                   initial=_INITIAL[initial] if initial else None, getter=getter, setter=setter)
-        if causality in ("input", "parameter"):
-            var.start = float(start)
-        return self._register(var, "Real", causality, start, unit, description, depends, initial_depends)
-
-    def reals(self, base: str, n: int, causality: str, units, description: str, starts=None,
-              depends=None, initial_depends=None) -> slice:
-        """Declare ``base[1]`` .. ``base[n]`` (contiguous value references); returns their slice.
-
-        ``units`` is one unit or one per element; ``description`` may use ``{i}`` (1-based) or
-        be a callable of i;
-        ``depends``/``initial_depends`` are lists of names, or callables of i giving them.
-        """
-        units = [units] * n if isinstance(units, str) else list(units)
-        starts = [0.0] * n if starts is None else list(starts)
-        first = len(self.vars)
-        for i in range(1, n + 1):
-            dep = depends(i) if callable(depends) else depends
-            idep = initial_depends(i) if callable(initial_depends) else initial_depends
-            text = description(i) if callable(description) else description.format(i=i)
-            self.real(f"{base}[{i}]", causality, units[i - 1], text, starts[i - 1], dep, idep)
-        return slice(first, first + n)
-
-    def _other(self, cls, kind, name, causality, description, start, variability, depends=None,
-               initial_depends=None):
-        self.other[name] = start
-        getter = lambda: self.other[name]
-        setter = None
-        if causality in ("input", "parameter"):
-            def setter(value):
+        if v.kind == "Real":
+            getter = lambda k=slot: float(values[k])
+        elif v.kind == "Boolean":
+            getter = lambda k=slot: bool(values[k])
+        else:
+            getter = lambda name=v.name: settings[name]
+        if v.causality in ("input", "parameter") and v.kind != "Real":   # Reals go through set_real
+            def setter(value, k=slot, name=v.name, kind=v.kind, causality=v.causality):
                 if causality == "parameter" and self._initialized:
                     self._raise_to_importer(f"cannot set parameter {name}: parameters are fixed "
                                             "once initialized")
-                self.other[name] = value
+                if kind == "Boolean":
+                    values[k] = float(bool(value))
+                else:
+                    settings[name] = value
                 self._dirty = True
-        initial = {"parameter": "exact", "output": "calculated"}.get(causality)
-        var = cls(name, causality=_CAUSALITY[causality], description=description,
-                  variability=_VARIABILITY[variability],
-                  initial=_INITIAL[initial] if initial else None, getter=getter, setter=setter)
-        if causality in ("input", "parameter"):
-            var.start = start
-        return self._register(var, kind, causality, 0.0, None, description, depends, initial_depends)
+        variability = "fixed" if v.causality == "parameter" else (
+            "continuous" if v.kind == "Real" else "discrete")
+        initial = {"parameter": "exact", "output": "calculated"}.get(v.causality)
+        var = _PYTHONFMU_TYPES[v.kind](
+            v.name, causality=_CAUSALITY[v.causality], description=v.description,
+            variability=_VARIABILITY[variability], initial=_INITIAL[initial] if initial else None,
+            getter=getter, setter=setter)
+        if v.causality in ("input", "parameter"):
+            var.start = v.start
+        self.register_variable(var)
 
-    def boolean(self, name, causality, description, start=False, depends=None, initial_depends=None):
-        return self._other(Boolean, "Boolean", name, causality, description, bool(start),
-                           "discrete" if causality != "parameter" else "fixed", depends, initial_depends)
-
-    def integer(self, name, description, start=0):
-        return self._other(Integer, "Integer", name, "parameter", description, int(start), "fixed")
-
-    def string(self, name, description, start=""):
-        return self._other(String, "String", name, "parameter", description, str(start), "fixed")
+    def _log_from_block(self, level: str, text: str) -> None:
+        status = Fmi2Status.warning if level == "warning" else Fmi2Status.error
+        self.log(f"{self.instance_name}: {text}", status)
 
     # -- FMI value access -----------------------------------------------------------------------
     def _refresh(self) -> None:
-        """Bring outputs up to date: from the inputs (feedthrough blocks) or, during
+        """Bring outputs up to date: from the inputs and state at the current time or, during
         initialization mode, from the parameters and inputs set so far (FMI 2.0 lets an
         importer read calculated outputs before fmi2ExitInitializationMode)."""
         if self._initialized:
-            if self.feedthrough:
-                self._evaluate_safely()
+            self._output_safely()
             return
         try:
-            self.initialize()
+            self.logic.configure()
+            self.logic.output(self.time)
         except Exception:
             pass        # invalid parameters are reported by fmi2ExitInitializationMode
         self._dirty = False
@@ -238,9 +169,10 @@ class BlockSlave(Fmi2Slave):
         index = self._indices.get(key)
         if index is None:
             index = np.asarray(vrs, dtype=np.intp)
-            if index.size and (index.min() < 0 or index.max() >= len(self.r) or not allowed[index].all()):
-                bad = [self._names[v] if 0 <= v < len(self.r) else v for v in vrs
-                       if not (0 <= v < len(self.r)) or not allowed[v]]
+            size = len(self.values)
+            if index.size and (index.min() < 0 or index.max() >= size or not allowed[index].all()):
+                bad = [self._names[v] if 0 <= v < size else v for v in vrs
+                       if not (0 <= v < size) or not allowed[v]]
                 if allowed is self._real:
                     wanted = "Real variables"
                 elif self._initialized:
@@ -254,11 +186,11 @@ class BlockSlave(Fmi2Slave):
     def get_real(self, vrs):
         if self._dirty:
             self._refresh()
-        return self.r[self._index(vrs, self._real, "fmi2GetReal")].tolist()
+        return self.values[self._index(vrs, self._real, "fmi2GetReal")].tolist()
 
     def set_real(self, vrs, values):
         allowed = self._input_real if self._initialized else self._settable_real
-        self.r[self._index(vrs, allowed, "fmi2SetReal")] = values
+        self.values[self._index(vrs, allowed, "fmi2SetReal")] = values
         self._dirty = True
 
     def get_boolean(self, vrs):
@@ -266,7 +198,7 @@ class BlockSlave(Fmi2Slave):
             self._refresh()
         return super().get_boolean(vrs)
 
-    # -- helpers for subclasses -----------------------------------------------------------------
+    # -- helpers --------------------------------------------------------------------------------
     def fail(self, message: str) -> bool:
         """Log ``message`` as an error through the FMI logger; returns False (step refused)."""
         self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
@@ -277,47 +209,14 @@ class BlockSlave(Fmi2Slave):
 
     def nonfinite_input(self) -> str | None:
         """'name = value' of the first non-finite Real input, or None."""
-        if math.isfinite(self.r.dot(self._input_mask)):    # fast path: nan and inf propagate
+        if math.isfinite(self.values.dot(self._input_mask)):    # fast path: nan and inf propagate
             return None
-        values = self.r[self._input_vrs]
+        values = self.values[self._input_vrs]
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size == 0:
             return None
         vr = self._input_vrs[bad[0]]
-        return f"{self._names[vr]} = {self.r[vr]}"
-
-    def param(self, name: str, low: float | None = None, high: float | None = None,
-              low_inclusive: bool = True, unit: str = "") -> float:
-        """A Real parameter's value, validated: ValueError naming it if out of range."""
-        value = float(self.r[self.meta[name].vr])
-        ok = math.isfinite(value)
-        if ok and low is not None:
-            ok = value >= low if low_inclusive else value > low
-        if ok and high is not None:
-            ok = value <= high
-        if not ok:
-            lo = "" if low is None else (">= " if low_inclusive else "> ") + f"{low:g}"
-            hi = "" if high is None else f"<= {high:g}"
-            rng = " and ".join(s for s in (lo, hi) if s) or "finite"
-            raise ValueError(f"parameter {name} = {value:g}{' ' + unit if unit else ''} is invalid: must be {rng}")
-        return value
-
-    # -- hooks ------------------------------------------------------------------------------------
-    def initialize(self) -> None:
-        raise NotImplementedError
-
-    def evaluate(self) -> None:
-        """Direct-feedthrough blocks: compute outputs from the current inputs."""
-
-    def step(self, t: float, h: float) -> bool:
-        raise NotImplementedError
-
-    def logic_state(self) -> dict:
-        """Internal state beyond the variables (JSON-compatible)."""
-        return {}
-
-    def set_logic_state(self, state: dict) -> None:
-        pass
+        return f"{self._names[vr]} = {self.values[vr]}"
 
     # -- FMI life cycle -----------------------------------------------------------------------------
     def setup_experiment(self, start_time: float, stop_time=None, tolerance=None):
@@ -325,11 +224,12 @@ class BlockSlave(Fmi2Slave):
 
     def exit_initialization_mode(self):
         try:
-            self.initialize()
+            self.logic.configure()
+            self.logic.output(self.time)
         except Exception as exc:
             self._raise_to_importer(f"initialization failed: {exc}")
         self._initialized = True
-        self._dirty = True
+        self._dirty = False
 
     def _raise_to_importer(self, message: str):
         """Log ``message`` as an error, then make the current FMI call fail.
@@ -346,7 +246,7 @@ class BlockSlave(Fmi2Slave):
             ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
         raise RuntimeError(f"{self.instance_name}: {message}")
 
-    def _evaluate_safely(self) -> None:
+    def _output_safely(self) -> None:
         bad = self.nonfinite_input()
         if bad is not None:
             if not self._held_warned:
@@ -355,7 +255,7 @@ class BlockSlave(Fmi2Slave):
                 self._held_warned = True
             return
         try:
-            self.evaluate()
+            self.logic.output(self.time)
             self._dirty = False
         except Exception as exc:
             self.log(f"{self.instance_name}: evaluating outputs at t = {self.time:.9g} s failed: "
@@ -363,63 +263,68 @@ class BlockSlave(Fmi2Slave):
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:
-            # a feedthrough block whose outputs are up to date has checked these inputs already
-            if self._dirty or not self.feedthrough:
-                bad = self.nonfinite_input()
-                if bad is not None:
-                    return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
-            if self.feedthrough and self._dirty:
-                self.evaluate()
-            ok = self.step(current_time, step_size)
+            bad = self.nonfinite_input()
+            if bad is not None:
+                return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
+            if self._dirty:
+                self.logic.output(current_time)     # the state a feedthrough block keeps (IK's last solution)
+            self.logic.advance(current_time, step_size)
+        except StepRefused as exc:
+            return self.fail(str(exc))
         except Exception as exc:
             return self.fail(f"step from t = {current_time:.9g} s failed: {type(exc).__name__}: {exc}\n"
                              f"{traceback.format_exc()}")
-        if ok:
-            self.time = current_time + step_size
-            self._held_warned = False
-            self._dirty = True      # internal state moved on: outputs at t + h are due
-        return ok
+        self.time = current_time + step_size
+        self._held_warned = False
+        self._dirty = True      # internal state moved on: outputs at t + h are due
+        return True
 
     # -- FMU state ------------------------------------------------------------------------------------
     def _get_fmu_state(self):
-        return {"time": self.time, "r": self.r.tolist(), "other": dict(self.other),
+        return {"time": self.time, "values": self.values.tolist(), "settings": dict(self.logic.settings),
                 "dirty": self._dirty, "initialized": self._initialized,
-                "logic": self.logic_state()}
+                "logic": self.logic.internal_state()}
 
     def _set_fmu_state(self, state):
         self.time = state["time"]
-        self.r[:] = state["r"]
-        self.other.update(state["other"])
+        self.values[:] = state["values"]
+        self.logic.settings.update(state["settings"])
         self._dirty = state["dirty"]
         self._initialized = state["initialized"]
-        self.set_logic_state(state["logic"])
+        self.logic.set_internal_state(state["logic"])
 
     # -- model description ----------------------------------------------------------------------------
     def to_xml(self, model_options=dict()) -> Element:
-        """pythonfmu's model description, completed with units, InitialUnknowns and dependencies."""
+        """pythonfmu's model description, completed with units, InitialUnknowns, dependencies and
+        a vendor annotation naming robot and block."""
         root = super().to_xml(model_options)
-        used = sorted({v.unit for v in self.meta.values() if v.unit})
+        meta = {v.name: v for v in self.logic.variables}
+        used = sorted({v.unit for v in meta.values() if v.unit})
         units = Element("UnitDefinitions")
         for name in used:
             unit = SubElement(units, "Unit", name=name)
             SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
-        children = list(root)
-        position = [c.tag for c in children].index("CoSimulation") + 1
-        root.insert(position, units)
+        tags = [c.tag for c in root]
+        root.insert(tags.index("CoSimulation") + 1, units)
+        annotations = Element("VendorAnnotations")
+        tool = SubElement(annotations, "Tool", name=VENDOR_TOOL)
+        SubElement(tool, "Block", robot=self.robot_name, kind=self.block_kind,
+                   variant=self.logic.variant, source=SOURCE_HASH)
+        root.insert([c.tag for c in root].index("ModelVariables"), annotations)
 
         index = {}
         for i, sv in enumerate(root.find("ModelVariables"), start=1):
-            var = self.meta[sv.get("name")]
+            var = meta[sv.get("name")]
             index[var.name] = i
             if var.unit:
                 sv[0].set("unit", var.unit)
             if var.kind == "Real" and sv[0].get("start") is not None:
-                sv[0].set("start", repr(float(self.r[var.vr])))   # pythonfmu's %.16g does not round-trip
+                sv[0].set("start", repr(float(var.start)))   # pythonfmu's %.16g does not round-trip
 
         structure = root.find("ModelStructure")
         for child in list(structure):
             structure.remove(child)
-        outputs = [v for v in self.meta.values() if v.causality == "output"]
+        outputs = [v for v in meta.values() if v.causality == "output"]
         if outputs:
             node = SubElement(structure, "Outputs")
             for v in outputs:

@@ -1,0 +1,26 @@
+"""The blocks a robot gets, FMI-free: each declares its ports and implements output / advance.
+
+>>> from robofmu.components.blocks import make_block
+>>> plant = make_block("rpp", "plant")
+"""
+from __future__ import annotations
+
+from ..robots import RobotDescription, load_description, load_model
+from .base import Block, StepRefused, Variable, block_class, registered
+from . import controller, fk, ik, plant, trajectory  # noqa: F401  (register the blocks)
+
+__all__ = ["Block", "StepRefused", "Variable", "block_class", "block_type", "make_block", "registered"]
+
+
+def block_type(description: RobotDescription, kind: str) -> type[Block]:
+    """The block class of ``kind`` for a robot: the trajectory's by the description's profile."""
+    if kind not in description.blocks:
+        raise ValueError(f"robot {description.name!r} has no {kind!r} block (it has: "
+                         f"{', '.join(description.blocks)})")
+    return block_class(kind, description.trajectory.kind if kind == "trajectory" else "")
+
+
+def make_block(robot: str | RobotDescription, kind: str) -> Block:
+    """A new block of ``kind`` for ``robot`` with its own robot-model instance."""
+    description = load_description(robot) if isinstance(robot, str) else robot
+    return block_type(description, kind)(load_model(description))

@@ -1,0 +1,77 @@
+"""Controller block: computed torque, tau = M(q)(qdd_ref + kd e' + kp e + ki z) + N(q, qd).
+
+Direct feedthrough: tau is computed from the inputs at the current communication point; the
+integral z = integral of e dt advances with the error held over the step (z += e h). For a robot
+with a payload the model carries ``payload_mass`` while ``grip`` is true (0 by default: the
+controller does not know the payload).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..control import ComputedTorque
+from .base import Block, vector_names
+
+
+class ControllerBlock(Block):
+    kind = "controller"
+    feedthrough = True
+    summary = "computed-torque PD/PID joint controller (direct feedthrough)"
+
+    def declare(self):
+        robot, d = self.robot, self.description
+        n = robot.n
+        gains = d.gains.get("pd") or next(iter(d.gains.values()))
+        self.real("kp", "parameter", "1/s2", "Proportional gain (every joint)", gains.kp, low=0.0)
+        self.real("kd", "parameter", "1/s", "Derivative gain (every joint)", gains.kd, low=0.0)
+        self.real("ki", "parameter", "1/s3", "Integral gain (every joint); 0 for PD", gains.ki, low=0.0)
+        self.real("g", "parameter", "m/s2", "Gravity in the controller's model", d.gravity, low=0.0)
+        self.has_payload = d.payload is not None
+        if self.has_payload:
+            self.real("payload_mass", "parameter", "kg", "Payload the model assumes while grip is true "
+                      "(0: unknown to it)", 0.0, low=0.0)
+        u0, u1, u2 = (robot.joint_units(k) for k in range(3))
+        self.q_ref = self.reals("q_ref", n, "input", u0, "Joint {i} reference position")
+        self.qd_ref = self.reals("qd_ref", n, "input", u1, "Joint {i} reference velocity")
+        self.qdd_ref = self.reals("qdd_ref", n, "input", u2, "Joint {i} reference acceleration")
+        self.q = self.reals("q", n, "input", u0, "Joint {i} measured position")
+        self.qd = self.reals("qd", n, "input", u1, "Joint {i} measured velocity")
+        inputs = [name for b in ("q_ref", "qd_ref", "qdd_ref", "q", "qd") for name in vector_names(b, n)]
+        if self.has_payload:
+            self.grip = self.boolean("grip", "input", "Gripper closed (the model adds payload_mass)")
+            inputs.append("grip")
+        self.tau = self.reals("tau", n, "output", robot.effort_units(),
+                              "Joint {i} actuator effort (torque, or force for a prismatic joint)",
+                              depends=inputs)
+        self.law = None
+
+    def configure(self):
+        self.robot.set_gravity(self.parameter("g"))
+        self.payload_mass = self.parameter("payload_mass") if self.has_payload else 0.0
+        self.law = ComputedTorque(self.robot, self.parameter("kp"), self.parameter("kd"), self.parameter("ki"))
+        super().configure()
+
+    def output(self, t):
+        v = self.values
+        if self.has_payload:
+            self.robot.set_payload(self.payload_mass if v[self.grip] else 0.0)
+        v[self.tau] = self.law.torque(v[self.q_ref], v[self.qd_ref], v[self.qdd_ref], v[self.q], v[self.qd])
+
+    def advance(self, t, h):
+        self.law.advance(self.values[self.q_ref], self.values[self.q], h)
+
+    def internal_state(self):
+        return {"z": None if self.law is None else [float(x) for x in self.law.z]}
+
+    def set_internal_state(self, state):
+        if self.law is not None and state.get("z") is not None:
+            self.law.z[:] = state["z"]
+
+    def continuous_state(self):
+        return self.law.z.copy()
+
+    def set_continuous_state(self, x):
+        self.law.z[:] = x
+
+    def derivative(self, t):
+        return self.values[self.q_ref] - self.values[self.q]

@@ -1,0 +1,84 @@
+"""IK block: joint reference (q, qd, qdd) from the task-space reference, direct feedthrough.
+
+The solver is the one the robot's description names; its declared parameters become the
+block's. Outside the workspace (or at a singularity) ``reachable`` is false, one warning is
+logged per excursion, and the block holds its last valid position with zero velocity and
+acceleration (zeros before it has one).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..ik import Unreachable, solver_class
+from ..parameters import resolve
+from .base import Block, vector_names
+
+
+class IKBlock(Block):
+    kind = "ik"
+    feedthrough = True
+    summary = ("inverse kinematics at position, velocity and acceleration level (qd = A^-1 xd, "
+               "qdd = A^-1 (xdd - Jdot qd)); direct feedthrough")
+
+    def declare(self):
+        choice = self.description.ik
+        if choice is None:
+            raise ValueError(f"{self.description.path}: robot has no [ik] table")
+        self.solver_type = solver_class(choice.kind)
+        values = resolve(self.solver_type.parameters, choice.parameters, f"{self.description.path}: [ik]")
+        for p in self.solver_type.parameters:
+            self.declare_parameter(p, values[p.name])
+        robot = self.robot
+        coords, m, n = robot.task_coordinates, robot.m, robot.n
+        start = robot.fk(robot.configuration("home"))
+        xs, xds, xdds = (vector_names(b, m) for b in ("x_ref", "xd_ref", "xdd_ref"))
+        self.x = self.reals("x_ref", m, "input", robot.task_units(0),
+                            lambda i: f"Target task coordinate {coords[i - 1]}", starts=start)
+        self.xd = self.reals("xd_ref", m, "input", robot.task_units(1),
+                             lambda i: f"Target task velocity along {coords[i - 1]}")
+        self.xdd = self.reals("xdd_ref", m, "input", robot.task_units(2),
+                              lambda i: f"Target task acceleration along {coords[i - 1]}")
+        self.q = self.reals("q_ref", n, "output", robot.joint_units(0), "Joint {i} reference position",
+                            depends=xs)
+        self.qd = self.reals("qd_ref", n, "output", robot.joint_units(1), "Joint {i} reference velocity",
+                             depends=xs + xds)
+        self.qdd = self.reals("qdd_ref", n, "output", robot.joint_units(2),
+                              "Joint {i} reference acceleration", depends=xs + xds + xdds)
+        self.reachable = self.boolean("reachable", "output", "False while the target lies outside the "
+                                      "workspace or at a singularity (last valid solution held)", depends=xs)
+        self.last = None          # last valid joint position
+        self.outside = False      # in an excursion (warned once per excursion)
+
+    def configure(self):
+        values = {p.name: self.parameter(p.name) for p in self.solver_type.parameters}
+        self.solver = self.solver_type(self.robot, **values)
+        self.last = None
+        self.outside = False
+        super().configure()
+
+    def output(self, t):
+        v = self.values
+        try:
+            q, qd, qdd = self.solver.solve(v[self.x], v[self.xd], v[self.xdd])
+        except Unreachable as exc:
+            if not self.outside:
+                held = ("holding the last valid solution" if self.last is not None else
+                        "no valid solution yet: outputs zero")
+                self.warn(f"t = {t:.9g} s: {exc}; {held}")
+                self.outside = True
+            v[self.reachable] = 0.0
+            v[self.q] = 0.0 if self.last is None else self.last
+            v[self.qd] = 0.0
+            v[self.qdd] = 0.0
+            return
+        v[self.reachable] = 1.0
+        self.outside = False
+        self.last = q
+        v[self.q], v[self.qd], v[self.qdd] = q, qd, qdd
+
+    def internal_state(self):
+        return {"last": None if self.last is None else [float(x) for x in self.last], "outside": self.outside}
+
+    def set_internal_state(self, state):
+        self.last = None if state["last"] is None else np.array(state["last"])
+        self.outside = bool(state["outside"])

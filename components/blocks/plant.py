@@ -1,0 +1,91 @@
+"""Plant block: M(q) qdd + C(q, qd) qd + g(q) = tau, integrated by RK4 with tau held over the step.
+
+No direct feedthrough: the outputs are the state at the communication point. The initial
+state defaults to the description's ``home`` configuration at rest.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..plant import Plant, PlantDiverged
+from .base import Block, StepRefused
+
+
+class PlantBlock(Block):
+    kind = "plant"
+    summary = ("manipulator dynamics M(q)qdd + C(q,qd)qd + g(q) = tau (Pinocchio ABA), RK4 with "
+               "tau held over the step; no direct feedthrough")
+
+    def declare(self):
+        robot, d = self.robot, self.description
+        n = robot.n
+        u0, u1 = robot.joint_units(0), robot.joint_units(1)
+        self.real("g", "parameter", "m/s2", "Gravity magnitude along the robot's gravity direction",
+                  d.gravity, low=0.0)
+        self.has_payload = d.payload is not None
+        if self.has_payload:
+            self.real("payload_mass", "parameter", "kg", "Point mass carried at the payload frame while "
+                      "grip is true", d.payload.mass, low=0.0)
+        self.real("max_substep", "parameter", "s", "Largest RK4 sub-step inside a communication step",
+                  1e-3, low=0.0)
+        self.reals("q0", n, "parameter", u0, "Joint {i} initial position (default: home)",
+                   starts=robot.configuration("home"))
+        self.reals("qd0", n, "parameter", u1, "Joint {i} initial velocity")
+        self.tau = self.reals("tau", n, "input", robot.effort_units(),
+                              "Joint {i} actuator effort (torque, or force for a prismatic joint)")
+        if self.has_payload:
+            self.grip = self.boolean("grip", "input", "Gripper closed: carry payload_mass")
+        self.q = self.reals("q", n, "output", u0, "Joint {i} position", depends=[],
+                            initial_depends=lambda i: [f"q0[{i}]"])
+        self.qd = self.reals("qd", n, "output", u1, "Joint {i} velocity", depends=[],
+                             initial_depends=lambda i: [f"qd0[{i}]"])
+        self.plant = None
+
+    def configure(self):
+        self.robot.set_gravity(self.parameter("g"))
+        max_substep = self.parameter("max_substep")
+        if max_substep <= 0.0:
+            raise ValueError(f"parameter max_substep = {max_substep:g} s is invalid: must be > 0")
+        self.plant = Plant(self.robot, self.finite_vector("q0"), self.finite_vector("qd0"),
+                           payload_mass=self.parameter("payload_mass") if self.has_payload else 0.0,
+                           max_substep=max_substep)
+        self._grip()
+        super().configure()
+
+    def _grip(self):
+        if self.has_payload:
+            closed = bool(self.values[self.grip])
+            if closed != self.plant.grip:
+                self.plant.set_grip(closed)
+
+    def output(self, t):
+        self.values[self.q], self.values[self.qd] = self.plant.q, self.plant.qd
+
+    def advance(self, t, h):
+        self._grip()
+        try:
+            self.plant.step(self.values[self.tau], h, t)
+        except PlantDiverged as exc:
+            raise StepRefused(str(exc)) from None
+
+    def internal_state(self):
+        if self.plant is None:
+            return {}
+        return {"x": [float(v) for v in self.plant.x], "grip": self.plant.grip}
+
+    def set_internal_state(self, state):
+        if self.plant is not None and state:
+            self.plant.x = np.array(state["x"])
+            self.plant.set_grip(state["grip"])
+
+    def continuous_state(self):
+        return self.plant.x.copy()
+
+    def set_continuous_state(self, x):
+        self.plant.x = np.array(x, dtype=float)
+
+    def derivative(self, t):
+        self._grip()
+        n = self.robot.n
+        x = self.plant.x
+        return np.concatenate([x[n:], self.robot.forward_dynamics(x[:n], x[n:], self.values[self.tau])])

@@ -1,0 +1,187 @@
+"""Trajectory blocks: the reference a robot follows, from its description's ``[trajectory]``.
+
+``waypoints``: task space, LSPB moves through waypoints with pauses (and gripper events);
+``line``: task space, a straight line at minimum time with a trapezoidal speed;
+``joint_bangbang``: joint space, the synchronized minimum-time bang-bang.
+Outputs at time t belong to t; no inputs.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..parameters import Parameter, resolve
+from ..trajectory import StraightLine, SynchronizedBangBang, WaypointTrajectory
+from .base import Block
+from .text import format_matrix, format_vector, parse_matrix, parse_vector
+
+
+class _Reference(Block):
+    """Common part: three outputs (position, velocity, acceleration) of one profile."""
+
+    kind = "trajectory"
+    summary = "reference profile"
+    abstract = True
+    profile = None
+
+    def declare_outputs(self, bases, units, describe):
+        n = len(units[0])
+        out = []
+        for base, unit, what in zip(bases, units, ("position", "velocity", "acceleration")):
+            out.append(self.reals(base, n, "output", unit, lambda i, w=what: describe(i, w), depends=[]))
+        self.outputs = out
+
+    def defaults(self, declared: tuple[Parameter, ...]) -> dict:
+        """The description's ``[trajectory]`` values for ``declared`` (validated)."""
+        given = dict(self.description.trajectory.parameters)
+        return resolve(declared, given, f"{self.description.path}: [trajectory]") if declared else given
+
+    def output(self, t):
+        p, v, a = self.outputs
+        self.values[p], self.values[v], self.values[a] = self.profile.evaluate(t, self.snap)
+
+    def breakpoints(self):
+        return self.profile.breakpoints
+
+    def nominal_stop_time(self):
+        """The profile's end with the default parameters."""
+        try:
+            self.configure()
+        except ValueError:
+            return None
+        return float(self.profile.breakpoints[-1])
+
+
+def _task(block):
+    coords = block.description.task.coordinates
+    units = [block.robot.task_units(k) for k in range(3)]
+    return coords, units
+
+
+class WaypointsBlock(_Reference):
+    variant = "waypoints"
+    summary = ("task-space reference through waypoints, one LSPB move per leg (cruise speed "
+               "cruise_factor x mean speed) with pauses between moves; outputs at time t belong to t")
+    settings_declared = (
+        Parameter("pause", "Real", "s", "Rest between two moves", 0.0, low=0.0),
+        Parameter("cruise_factor", "Real", "1", "Cruise speed over the move's mean speed, in (1, 2]", 1.5,
+                  low=1.0, high=2.0),
+        Parameter("grip_close_after_move", "Integer", "", "The gripper closes at the end of this move "
+                  "(1-based; 0: never)", 0, low=0),
+        Parameter("grip_open_after_move", "Integer", "", "The gripper opens at the end of this move "
+                  "(1-based; 0: never)", 0, low=0),
+    )
+
+    def declare(self):
+        given = dict(self.description.trajectory.parameters)
+        where = f"{self.description.path}: [trajectory]"
+        for key in ("waypoints", "durations"):
+            if key not in given:
+                raise ValueError(f"{where}: parameter {key!r} missing")
+        values = resolve(self.settings_declared, {k: v for k, v in given.items()
+                                                  if k not in ("waypoints", "durations")}, where)
+        coords, units = _task(self)
+        self.string_parameter("waypoints", f"Waypoints ({', '.join(units[0])}), one row per point "
+                              "('x y z'), rows separated by ';'", format_matrix(given["waypoints"]))
+        self.string_parameter("durations", "Duration of each move (s), space-separated; one per leg",
+                              format_vector(given["durations"]))
+        self.has_grip = "grip_close_after_move" in given
+        for p in self.settings_declared:
+            if p.name.startswith("grip") and not self.has_grip:
+                continue
+            self.declare_parameter(p, values[p.name])
+        self.declare_outputs(("x_ref", "xd_ref", "xdd_ref"), units,
+                             lambda i, w: f"Reference task {w} along {coords[i - 1]}")
+        if self.has_grip:
+            self.grip = self.boolean("grip", "output", "Gripper closed (carrying the payload)", depends=[])
+
+    def string_parameter(self, name, description, start):
+        self.setting(Parameter(name, "String", "", description, start), start)
+
+    def configure(self):
+        m = self.robot.m
+        close = self.parameter("grip_close_after_move") if self.has_grip else 0
+        open_ = self.parameter("grip_open_after_move") if self.has_grip else 0
+        self.profile = WaypointTrajectory(
+            parse_matrix(str(self.settings["waypoints"]), "parameter waypoints", columns=m),
+            parse_vector(str(self.settings["durations"]), "parameter durations"),
+            pause=self.parameter("pause"), cruise_factor=self.parameter("cruise_factor"),
+            grip_close_after_move=close, grip_open_after_move=open_)
+        super().configure()
+
+    def output(self, t):
+        super().output(t)
+        if self.has_grip:
+            self.values[self.grip] = self.profile.grip(t)
+
+    def events(self):
+        found = {"grip closes": self.profile.grip_close_time, "grip opens": self.profile.grip_open_time}
+        return {k: float(v) for k, v in found.items() if np.isfinite(v)}
+
+
+class LineBlock(_Reference):
+    variant = "line"
+    summary = ("task-space straight line at minimum time with a trapezoidal speed profile (v_max, "
+               "a_max), then at rest; outputs at time t belong to t")
+    scalars = (
+        Parameter("length", "Real", "m", "Path length", None, low=0.0),
+        Parameter("v_max", "Real", "m/s", "Speed limit along the path", None, low=0.0),
+        Parameter("a_max", "Real", "m/s2", "Acceleration limit along the path", None, low=0.0),
+    )
+
+    def declare(self):
+        given = dict(self.description.trajectory.parameters)
+        where = f"{self.description.path}: [trajectory]"
+        coords, units = _task(self)
+        m = len(coords)
+        for key in ("start", "direction"):
+            if len(given.get(key, ())) != m:
+                raise ValueError(f"{where}: parameter {key!r} needs {m} values")
+        values = resolve(self.scalars, {k: v for k, v in given.items() if k not in ("start", "direction")}, where)
+        self.start = self.reals("start", m, "parameter", units[0],
+                                lambda i: f"Start point, coordinate {coords[i - 1]}", given["start"])
+        self.direction = self.reals("direction", m, "parameter", "1",
+                                    lambda i: f"Direction of travel, component {coords[i - 1]} "
+                                              "(normalized by the block)", given["direction"])
+        for p in self.scalars:
+            self.declare_parameter(p, values[p.name])
+        self.declare_outputs(("x_ref", "xd_ref", "xdd_ref"), units,
+                             lambda i, w: f"Reference task {w} along {coords[i - 1]}")
+
+    def configure(self):
+        self.profile = StraightLine(self.finite_vector("start"), self.finite_vector("direction"),
+                                    self.positive("length"), self.positive("v_max"), self.positive("a_max"))
+        super().configure()
+
+    def positive(self, name):
+        value = self.parameter(name)
+        if value <= 0.0:
+            raise ValueError(f"parameter {name} = {value:g} is invalid: must be > 0")
+        return value
+
+
+class JointBangBangBlock(_Reference):
+    variant = "joint_bangbang"
+    summary = ("joint-space synchronized minimum-time bang-bang from q_start to q_end (every joint "
+               "finishes at the slowest joint's minimum time), then at rest; outputs at t belong to t")
+
+    def declare(self):
+        given = dict(self.description.trajectory.parameters)
+        where = f"{self.description.path}: [trajectory]"
+        n = self.robot.n
+        unknown = sorted(set(given) - {"q_start", "q_end", "a_max"})
+        if unknown:
+            raise ValueError(f"{where}: unknown parameter {unknown[0]!r} (known: a_max, q_end, q_start)")
+        for key in ("q_start", "q_end", "a_max"):
+            if len(given.get(key, ())) != n:
+                raise ValueError(f"{where}: parameter {key!r} needs {n} values")
+        units = [self.robot.joint_units(k) for k in range(3)]
+        self.reals("q_start", n, "parameter", units[0], "Joint {i} start position (at rest)", given["q_start"])
+        self.reals("q_end", n, "parameter", units[0], "Joint {i} end position (at rest)", given["q_end"])
+        self.reals("a_max", n, "parameter", units[2], "Joint {i} acceleration limit", given["a_max"])
+        self.declare_outputs(("q_ref", "qd_ref", "qdd_ref"), units,
+                             lambda i, w: f"Joint {i} reference {w}")
+
+    def configure(self):
+        self.profile = SynchronizedBangBang(self.finite_vector("q_start"), self.finite_vector("q_end"),
+                                            self.finite_vector("a_max"))
+        super().configure()

@@ -1,0 +1,13 @@
+"""Inverse kinematics as a family of solvers behind one interface.
+
+Each solver (:class:`IKSolver` subclass) declares its parameters and implements the position
+level; velocity and acceleration follow for every solver from the robot model's J and Jdot qd
+(:meth:`IKSolver.solve`). Solvers register by ``kind``; a robot description names its solver
+in ``[ik] solver = ...``.
+"""
+from __future__ import annotations
+
+from .base import IKSolver, Unreachable, make_solver, solver_class, solvers
+from . import closed_form  # noqa: F401  (registers the closed-form solvers)
+
+__all__ = ["IKSolver", "Unreachable", "make_solver", "solver_class", "solvers"]

@@ -1,0 +1,136 @@
+"""The IK solver interface and the joint rates shared by every solver.
+
+With task Jacobian J(q) (m, n) and, where a solver fixes extra joint combinations (a tool pitch
+held constant), constant constraint rows C (c, n) with m + c = n, the augmented matrix
+A = [J; C] gives
+
+    qd  = A^-1 [xd; 0]
+    qdd = A^-1 [xdd - Jdot(q, qd) qd; 0]
+
+(the constraint rows are constant, so their time derivative adds nothing).
+"""
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from ..parameters import Parameter, resolve
+from ..robots.model import RobotModel
+
+_SOLVERS: dict[str, type["IKSolver"]] = {}
+
+
+class Unreachable(ValueError):
+    """The target lies outside the workspace of the solver's branch, or on a singularity."""
+
+
+class IKSolver:
+    """Base of every IK solver.
+
+    Subclasses set ``kind`` (the registry name), ``parameters`` (declared
+    :class:`~robofmu.components.parameters.Parameter` s) and implement :meth:`position`; a
+    solver that holds extra joint combinations fixed overrides ``constraint_rows``.
+
+    Parameters
+    ----------
+    robot : RobotModel
+    **values
+        Parameter values (validated against the declaration; defaults from it).
+    """
+
+    kind: ClassVar[str] = ""
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if not cls.kind:
+            raise TypeError(f"{cls.__name__}: an IK solver needs a registry name `kind`")
+        if cls.position is IKSolver.position:
+            raise TypeError(f"{cls.__name__}: an IK solver must implement position(x)")
+        if cls.kind in _SOLVERS:
+            raise TypeError(f"{cls.__name__}: IK solver kind {cls.kind!r} is taken by "
+                            f"{_SOLVERS[cls.kind].__name__}")
+        _SOLVERS[cls.kind] = cls
+
+    def __init__(self, robot: RobotModel, **values):
+        self.robot = robot
+        self.values = resolve(self.parameters, values, f"IK solver {self.kind!r}")
+        self.constraint_rows = np.zeros((0, robot.n))
+        self.setup()
+        rows = robot.m + len(self.constraint_rows)
+        if rows != robot.n:
+            raise ValueError(f"IK solver {self.kind!r}: {robot.m} task coordinates and "
+                             f"{len(self.constraint_rows)} constraints for {robot.n} joints")
+        self._padding = np.zeros(len(self.constraint_rows))
+
+    def setup(self) -> None:
+        """Read the parameters (``self.values``) and robot geometry; set ``constraint_rows``."""
+
+    def position(self, x: np.ndarray) -> np.ndarray:
+        """Joint positions (rad, m), shape (n,), placing the task point at ``x``; raises Unreachable."""
+        raise NotImplementedError
+
+    def augmented_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """A(q) = [J(q); C], shape (n, n)."""
+        return np.vstack([self.robot.jacobian(q), self.constraint_rows])
+
+    def rates(self, q: np.ndarray, xd: np.ndarray, xdd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint velocity and acceleration for task velocity ``xd`` and acceleration ``xdd`` at ``q``.
+
+        Raises
+        ------
+        Unreachable
+            If A(q) is singular (or the rates are not finite).
+        """
+        A = self.augmented_jacobian(q)
+        try:
+            qd = np.linalg.solve(A, np.concatenate([xd, self._padding]))
+            qdd = np.linalg.solve(A, np.concatenate(
+                [np.asarray(xdd) - self.robot.jdot_qdot(q, qd), self._padding]))
+        except np.linalg.LinAlgError:
+            raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}") from None
+        if not np.isfinite(qd.sum() + qdd.sum()):
+            raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
+        return qd, qdd
+
+    def solve(self, x, xd, xdd):
+        """Joint position, velocity and acceleration for a task-space motion.
+
+        Parameters
+        ----------
+        x, xd, xdd : array_like, shape (m,)
+            Task position, velocity and acceleration (task units).
+
+        Returns
+        -------
+        q, qd, qdd : ndarray, shape (n,)
+            Joint units.
+
+        Raises
+        ------
+        Unreachable
+        """
+        q = self.position(np.asarray(x, dtype=float))
+        qd, qdd = self.rates(q, np.asarray(xd, dtype=float), xdd)
+        return q, qd, qdd
+
+
+def solvers() -> list[str]:
+    """Registered solver names."""
+    return sorted(_SOLVERS)
+
+
+def solver_class(kind: str) -> type[IKSolver]:
+    try:
+        return _SOLVERS[kind]
+    except KeyError:
+        raise ValueError(f"unknown IK solver {kind!r}; known: {', '.join(solvers())}") from None
+
+
+def make_solver(robot: RobotModel, **overrides) -> IKSolver:
+    """The solver the robot's description names, with its ``[ik]`` values and ``overrides``."""
+    choice = robot.description.ik
+    if choice is None:
+        raise ValueError(f"robot {robot.description.name!r} has no IK ([ik] table)")
+    return solver_class(choice.kind)(robot, **{**choice.parameters, **overrides})

@@ -1,0 +1,123 @@
+"""The robot-model interface every block talks to, whatever the mechanism.
+
+Joint coordinates q (n,) are the actuated joints: rad for revolute, m for prismatic. Task
+coordinates x (m,) are what the trajectory and the IK speak: a point's position (m) for the
+arms, possibly with an orientation angle (rad) for a planar mechanism. A serial arm implements
+this on Pinocchio (:class:`~robofmu.components.robots.serial.SerialRobot`); a closed-chain
+mechanism can implement the same methods in its actuated coordinates.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from .description import RobotDescription
+
+_DERIVATIVE_SUFFIX = ("", "/s", "/s2")
+
+
+def derivative_unit(unit: str, order: int) -> str:
+    """SI unit of the ``order``-th time derivative (0, 1, 2) of a coordinate in ``unit``."""
+    return unit + _DERIVATIVE_SUFFIX[order]
+
+
+class RobotModel(ABC):
+    """Kinematics and rigid-body dynamics in joint coordinates, with task coordinates.
+
+    Attributes
+    ----------
+    description : RobotDescription
+    n : int
+        Number of joint coordinates.
+    m : int
+        Number of task coordinates.
+    prismatic : list of bool, shape (n,)
+    joint_names : list of str
+    """
+
+    description: RobotDescription
+    n: int
+    m: int
+    prismatic: list[bool]
+    joint_names: list[str]
+
+    # -- units and names ---------------------------------------------------------------------
+    def joint_units(self, order: int = 0) -> list[str]:
+        """SI unit of each joint coordinate's ``order``-th time derivative (0, 1 or 2)."""
+        return [derivative_unit("m" if p else "rad", order) for p in self.prismatic]
+
+    def effort_units(self) -> list[str]:
+        """N for a prismatic joint, N.m for a revolute one."""
+        return ["N" if p else "N.m" for p in self.prismatic]
+
+    def joint_symbols(self) -> list[str]:
+        """Short plot labels: q1, q2, ... (the unit tells revolute from prismatic)."""
+        return [f"q{j + 1}" for j in range(self.n)]
+
+    @property
+    def task_coordinates(self) -> tuple[str, ...]:
+        return self.description.task.coordinates
+
+    @abstractmethod
+    def task_units(self, order: int = 0) -> list[str]:
+        """SI unit of each task coordinate's ``order``-th time derivative."""
+
+    def configuration(self, name: str) -> np.ndarray:
+        """A named joint configuration of the description (``home``, ...), shape (n,)."""
+        return np.array(self.description.configuration(name), dtype=float)
+
+    # -- parameters ---------------------------------------------------------------------------
+    @abstractmethod
+    def set_gravity(self, magnitude: float) -> None:
+        """Magnitude of gravity (m/s^2) along the description's direction."""
+
+    @abstractmethod
+    def set_payload(self, mass: float) -> None:
+        """Carry a point mass (kg) at the payload frame; 0 removes it."""
+
+    # -- kinematics ---------------------------------------------------------------------------
+    @abstractmethod
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """Task coordinates x(q), shape (m,)."""
+
+    @abstractmethod
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Task Jacobian, shape (m, n): xd = J(q) qd."""
+
+    @abstractmethod
+    def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Jdot(q, qd) qd, shape (m,): the task acceleration when qdd = 0."""
+
+    # -- dynamics -----------------------------------------------------------------------------
+    @abstractmethod
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """M(q), shape (n, n), symmetric positive definite."""
+
+    @abstractmethod
+    def coriolis_matrix(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """C(q, qd), shape (n, n), with Mdot - 2C skew-symmetric."""
+
+    @abstractmethod
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        """g(q), shape (n,)."""
+
+    @abstractmethod
+    def nonlinear_effects(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """N(q, qd) = C(q, qd) qd + g(q), shape (n,)."""
+
+    @abstractmethod
+    def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """qdd = M^-1 (tau - N), shape (n,)."""
+
+    @abstractmethod
+    def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """tau = M qdd + N, shape (n,)."""
+
+    @abstractmethod
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        """Kinetic energy (J)."""
+
+    @abstractmethod
+    def potential_energy(self, q: np.ndarray) -> float:
+        """Gravitational potential energy (J)."""

@@ -1,0 +1,79 @@
+"""What the signals of an experiment mean: its ``[roles]`` and its robot.
+
+Analysis, plots, the convergence study and the report read signals by role (``q``: measured
+joint positions, ``q_ref``: joint reference, ``tau``: efforts, ``x_ref``: task reference,
+``grip``: gripper), never by instance name; units come from the recorded FMUs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robofmu.components.robots import RobotModel, load_model
+
+from .diagram import System
+from .result import Result
+
+
+@dataclass(frozen=True)
+class Roles:
+    """Signal bases by role (``None`` where the experiment has none) and the robot's name.
+
+    Attributes
+    ----------
+    robot : str
+    q, qd, q_ref, tau : str or None
+        Vector bases, e.g. ``"plant.q"``.
+    x_ref, grip : str or None
+    """
+
+    robot: str
+    q: str | None = None
+    qd: str | None = None
+    q_ref: str | None = None
+    tau: str | None = None
+    x_ref: str | None = None
+    grip: str | None = None
+
+    @classmethod
+    def of(cls, system: System) -> "Roles":
+        """The roles an experiment declares; ValueError if it names no robot."""
+        robot = system.extra.get("robot")
+        if not robot:
+            raise ValueError(f"{system.name}: the experiment names no `robot`")
+        return cls(robot=str(robot), **dict(system.extra.get("roles", {})))
+
+    def require(self, *names: str) -> None:
+        missing = [n for n in names if getattr(self, n) is None]
+        if missing:
+            raise ValueError(f"the experiment declares no role {', '.join(missing)} in [roles]")
+
+    def model(self) -> RobotModel:
+        """A new model of the experiment's robot."""
+        return load_model(self.robot)
+
+    def vector(self, result: Result, role: str) -> np.ndarray:
+        """The recorded vector of a role, shape (k, n)."""
+        self.require(role)
+        return result.vector(getattr(self, role))
+
+    def tcp_error(self, result: Result, model: RobotModel | None = None) -> np.ndarray | None:
+        """|FK(q) - x_ref| at every recorded point (task units), or None without an x_ref role."""
+        if self.x_ref is None or self.q is None:
+            return None
+        model = model or self.model()
+        q = result.vector(self.q)
+        tcp = np.array([model.fk(v) for v in q])
+        return np.linalg.norm(tcp - result.vector(self.x_ref), axis=1)
+
+    def events(self, result: Result) -> dict[str, float]:
+        """Instants where the gripper closes and opens (s), from the recorded ``grip`` role."""
+        if self.grip is None or self.grip not in result.columns:
+            return {}
+        closed = result[self.grip] > 0.5
+        change = np.flatnonzero(np.diff(closed.astype(int)))
+        events = {}
+        for k in change:
+            events["grip closes" if closed[k + 1] else "grip opens"] = float(result.time[k + 1])
+        return events

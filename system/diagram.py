@@ -43,8 +43,32 @@ def spread(names: list[str], value, what: str) -> list:
 
 
 def coerce(kind: str, value, what: str):
-    """``value`` as the Python value of an FMI ``kind`` (Real, Integer, Boolean, String), or
-    ValueError naming ``what``; a string is parsed as a model description's start attribute."""
+    """``value`` as the Python value of an FMI ``kind``: the one parser of typed FMI values.
+
+    Used for experiment parameters, model-description start values, SSV parameter values and
+    libcosim initial values alike.
+
+    Parameters
+    ----------
+    kind : {"Real", "Integer", "Enumeration", "Boolean", "String"}
+        The FMI type of the variable.
+    value : float, int, bool, str
+        A Python value, or a string as a model description's ``start`` attribute (or an SSV
+        ``value``) spells it: ``"0.5"``, ``"3"``, ``"true"`` / ``"false"`` / ``"1"`` / ``"0"``.
+    what : str
+        The variable, for the error message.
+
+    Returns
+    -------
+    float, int, bool or str
+        float for Real, int for Integer and Enumeration, bool for Boolean, str for String.
+
+    Raises
+    ------
+    ValueError
+        Naming ``what``, if ``value`` is not a ``kind`` (a bool is no Real, 1.5 no Integer, 2
+        no Boolean, a number no String) or ``kind`` is not supported.
+    """
     try:
         if kind == "Real":
             if isinstance(value, bool):

@@ -24,9 +24,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .diagram import expand, spread
+from .diagram import coerce, expand, spread
 
 NANO = 1_000_000_000
+_FMI_TYPES = {"REAL": "Real", "INTEGER": "Integer", "BOOLEAN": "Boolean", "STRING": "String"}   # libcosim -> FMI
 
 
 def to_ns(t: float) -> int:
@@ -189,11 +190,12 @@ class CosimRun:
         index = self.index(instance)
         variables = self.variables(instance, name)
         ex = self.execution
-        setters = {"REAL": (ex.real_initial_value, float), "INTEGER": (ex.integer_initial_value, int),
-                   "BOOLEAN": (ex.boolean_initial_value, bool), "STRING": (ex.string_initial_value, str)}
+        setters = {"REAL": ex.real_initial_value, "INTEGER": ex.integer_initial_value,
+                   "BOOLEAN": ex.boolean_initial_value, "STRING": ex.string_initial_value}
         for var, v in zip(variables, spread(variables, value, f"{instance}.{name}")):
-            setter, cast = setters[var.type]
-            self._check(setter(index, var.reference, cast(v)), f"initial value {instance}.{var.name} = {v!r}")
+            typed = coerce(_FMI_TYPES[var.type], v, f"{instance}.{var.name}")
+            self._check(setters[var.type](index, var.reference, typed),
+                        f"initial value {instance}.{var.name} = {v!r}")
 
     def override(self, instance: str, name: str, value) -> None:
         """Override a Real variable (or vector) from now on, through the override manipulator:
@@ -204,7 +206,8 @@ class CosimRun:
         bad = [v.name for v in variables if v.type != "REAL"]
         if bad:
             raise TypeError(f"{instance}: override supports Real variables only, not {bad}")
-        values = [float(v) for v in spread(variables, value, f"{instance}.{name}")]
+        values = [coerce("Real", v, f"{instance}.{var.name}")
+                  for var, v in zip(variables, spread(variables, value, f"{instance}.{name}"))]
         self._check(self.manipulator.slave_real_values(self.index(instance), [v.reference for v in variables],
                                                        values),
                     f"override {instance}.{name}")

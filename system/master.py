@@ -1,127 +1,70 @@
-"""The co-simulation master: checks a diagram, initializes its FMUs and steps them.
+"""The co-simulation master: runs a planned diagram, initializing its FMUs and stepping them.
+
+:meth:`Master.check` plans the diagram (:func:`robofmu.system.check.plan`: every problem at
+once, the evaluation order); :meth:`Master.run` instantiates the blocks in that order and steps
+them, returning a :class:`~robofmu.system.result.Result`.
 
 At every communication point t the master evaluates the diagram in dependency order
 (Gauss-Seidel: a direct-feedthrough block reads inputs its upstream blocks produced at t, so
 trajectory -> ik -> controller -> plant has no step of delay); inputs that come from blocks
 evaluated later (the plant's torque: the plant has no feedthrough, so it is evaluated before the
 controller) are set once the pass is over. It records every output, then calls doStep(t, h) on
-each block, so the plant integrates [t, t + h] with the torque computed at t. The Jacobi option reads all outputs first and then sets all inputs,
-so each feedthrough block lags one step (for comparison).
+each block, so the plant integrates [t, t + h] with the torque computed at t. The Jacobi option
+reads all outputs first and then sets all inputs, so each feedthrough block lags one step (for
+comparison).
 
 Values move between FMUs through preallocated buffers: one batched fmi2GetReal per block into a
-signal vector, one batched fmi2SetReal per block from it; nothing is allocated per step.
+signal vector, one batched fmi2SetReal per block from it; no buffer is allocated per step. The
+FMI functions are taken from the FMU's shared library as fmpy loaded it (``FMU2Slave.dll``) and
+called without fmpy's per-call Python wrapper; the master checks each returned status itself.
+
+``Result``, ``DiagramError`` and ``step_count`` are re-exported from
+:mod:`robofmu.system.result` and :mod:`robofmu.system.check`.
 """
 from __future__ import annotations
 
-import csv
 import ctypes
 import math
 import time as _time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import fmpy
 import numpy as np
-from fmpy import read_model_description
-from fmpy.fmi2 import fmi2True
+from fmpy.fmi2 import fmi2Boolean, fmi2Component, fmi2Real, fmi2Status, fmi2True, fmi2ValueReference
 
-from .diagram import System, coerce, expand, select, spread
+from .check import DiagramError, Link, Node, Plan, plan, step_count, variable_unit
+from .diagram import System, select
 from .fmu import STATUS, Block, FMUError, LogMessage
+from .result import Result
+
+__all__ = ["ALGORITHMS", "DiagramError", "Master", "Result", "SimulationError", "step_count"]
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 
 
-def step_count(start_time: float, stop_time: float, step: float) -> int:
-    """Number of communication steps of ``step`` s from start to stop; ValueError unless whole."""
-    if not (step > 0 and math.isfinite(step)):
-        raise ValueError(f"communication step must be > 0 s, got {step}")
-    n = int(round((stop_time - start_time) / step))
-    if n < 1 or abs(start_time + n * step - stop_time) > 1e-9 * max(1.0, abs(stop_time)):
-        raise ValueError(f"stop time {stop_time} s is not start time {start_time} s plus a whole "
-                         f"number of {step} s steps")
-    return n
-
-
-class DiagramError(ValueError):
-    """The diagram cannot run; ``problems`` lists every reason, each naming blocks and variables."""
-
-    def __init__(self, system: str, problems: list[str]):
-        super().__init__(f"{system}: the diagram cannot run:\n  - " + "\n  - ".join(problems))
-        self.problems = problems
-
-
 class SimulationError(RuntimeError):
-    """A run failed; ``result`` holds everything recorded up to the failure."""
+    """A run failed.
 
-    def __init__(self, message: str, block: str | None, time: float | None, result: "Result | None"):
+    Attributes
+    ----------
+    block : str or None
+        The instance that failed.
+    time : float or None
+        The communication point (s) of the failure (None: at instantiation).
+    result : Result or None
+        Everything recorded up to the failure (None if it failed before the first point).
+    """
+
+    def __init__(self, message: str, block: str | None, time: float | None, result: Result | None):
         super().__init__(message)
         self.block = block
         self.time = time
         self.result = result
 
 
-@dataclass
-class Result:
-    """Recorded signals: ``time`` (n,) in s and ``data`` (n, m), one column per signal."""
-
-    time: np.ndarray
-    columns: list[str]
-    data: np.ndarray
-    info: dict = field(default_factory=dict)
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        try:
-            return self.data[:, self.columns.index(name)]
-        except ValueError:
-            raise KeyError(f"no recorded signal {name!r}") from None
-
-    def vector(self, name: str) -> np.ndarray:
-        """All indices of a recorded vector, e.g. ``plant.q`` -> shape (n, 4)."""
-        cols = [i for i, c in enumerate(self.columns) if c.startswith(name + "[")]
-        if not cols:
-            raise KeyError(f"no recorded vector {name!r}")
-        return self.data[:, cols]
-
-    def to_csv(self, path: str | Path) -> Path:
-        """``time`` then one column per signal (``instance.variable``), full precision."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["time", *self.columns])
-            for t, row in zip(self.time, self.data):
-                w.writerow([repr(float(t)), *(repr(float(v)) for v in row)])
-        return path
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> "Result":
-        with Path(path).open() as f:
-            rows = list(csv.reader(f))
-        data = np.array([[float(v) for v in r] for r in rows[1:]]).reshape(-1, len(rows[0]))
-        return cls(data[:, 0], rows[0][1:], data[:, 1:])
-
-
-class _Port:
-    """Preallocated ctypes views for one batched get or set of one type on one block."""
-
-    def __init__(self, vrs: list[int], buffer: np.ndarray, ctype):
-        self.n = len(vrs)
-        self.vr = (ctypes.c_uint * max(self.n, 1))(*vrs)
-        self.buffer = buffer
-        self.c = (ctype * self.n).from_buffer(buffer) if self.n else None
-
-
-@dataclass
-class _Node:
-    spec: object
-    path: Path
-    md: object
-    variables: dict
-    feedthrough: dict = field(default_factory=dict)   # output name -> set of input names
-
-
 class Master:
-    """Runs a :class:`System`.
+    """Runs a :class:`~robofmu.system.diagram.System`.
 
     Parameters
     ----------
@@ -129,9 +72,17 @@ class Master:
     record : list of str, optional
         ``instance.variable`` patterns (fnmatch) of the outputs to record; default all outputs.
     progress : callable, optional
-        ``progress(fraction, t)`` about 20 times in a run.
+        ``progress(fraction, t)`` about 20 times in a run (t in s).
     log : callable, optional
         Receives every FMU log message as it arrives.
+
+    Attributes
+    ----------
+    plan : Plan or None
+        The checked diagram (None until :meth:`check`); :attr:`nodes`, :attr:`links`,
+        :attr:`order` and :attr:`warnings` read it.
+    blocks : dict of str to Block
+        The instantiated blocks during a run.
     """
 
     def __init__(self, system: System, record: list[str] | None = None,
@@ -141,162 +92,34 @@ class Master:
         self.record = record
         self.progress = progress
         self.log = log
-        self.warnings: list[str] = []
-        self.order: list[str] = []
-        self.nodes: dict[str, _Node] = {}
+        self.plan: Plan | None = None
         self.blocks: dict[str, Block] = {}
-        self._checked = False
 
-    # -- checks ------------------------------------------------------------------------------------
+    # -- the plan ----------------------------------------------------------------------------------
     def check(self) -> list[str]:
         """Refuse a diagram that cannot run (DiagramError); return the warnings."""
-        from fmpy.validation import validate_fmu
+        self.plan = plan(self.system)
+        return self.plan.warnings
 
-        s = self.system
-        problems: list[str] = []
-        self.nodes = {}
-        for spec in s.blocks:
-            path = s.fmu_path(spec)
-            if not path.is_file():
-                problems.append(f"block {spec.name!r}: FMU {path} does not exist (run `robofmu build`)")
-                continue
-            try:
-                found = validate_fmu(str(path))
-                md = read_model_description(str(path), validate=False)
-            except Exception as exc:
-                problems.append(f"block {spec.name!r}: {path} is not a valid FMU: {exc}")
-                continue
-            if found:
-                problems.append(f"block {spec.name!r}: {path} is not a valid FMU: " + "; ".join(map(str, found)))
-                continue
-            if md.coSimulation is None:
-                problems.append(f"block {spec.name!r}: {path} is not a co-simulation FMU")
-                continue
-            node = _Node(spec, path, md, {v.name: v for v in md.modelVariables})
-            inputs = {n for n, v in node.variables.items() if v.causality == "input"}
-            for u in md.outputs:
-                deps = u.dependencies
-                node.feedthrough[u.variable.name] = inputs if deps is None else {d.name for d in deps} & inputs
-            self.nodes[spec.name] = node
+    @property
+    def nodes(self) -> dict[str, Node]:
+        """The planned blocks by instance name ({} before :meth:`check`)."""
+        return self.plan.nodes if self.plan is not None else {}
 
-        def names(node: _Node, base: str) -> list[str]:
-            return expand(node.variables, base)
+    @property
+    def links(self) -> list[Link]:
+        """The scalar connections ([] before :meth:`check`)."""
+        return self.plan.links if self.plan is not None else []
 
-        for spec in s.blocks:
-            node = self.nodes.get(spec.name)
-            if node is None:
-                continue
-            for pname, value in spec.parameters.items():
-                vs = names(node, pname)
-                if not vs:
-                    problems.append(f"block {spec.name!r}: unknown parameter {pname!r} in {node.path.name}")
-                    continue
-                if any(node.variables[v].causality not in ("parameter", "input") for v in vs):
-                    problems.append(f"block {spec.name!r}: {pname!r} is a {node.variables[vs[0]].causality}, "
-                                    "not a parameter")
-                    continue
-                try:
-                    for v, x in zip(vs, spread(vs, value, f"{spec.name}.{pname}")):
-                        coerce(node.variables[v].type, x, f"{spec.name}.{v}")
-                except ValueError as exc:
-                    problems.append(f"block {spec.name!r}: parameter {exc}")
+    @property
+    def order(self) -> list[str]:
+        """The evaluation (and instantiation) order ([] before :meth:`check`)."""
+        return self.plan.order if self.plan is not None else []
 
-        self.links: list[tuple[str, str, str, str]] = []   # src, out, dst, in (scalar names)
-        driven: dict[tuple[str, str], str] = {}
-        for wire in s.wires:
-            src, dst = self.nodes.get(wire.src), self.nodes.get(wire.dst)
-            for end, node in ((wire.src, src), (wire.dst, dst)):
-                if node is None and end not in [b.name for b in s.blocks]:
-                    problems.append(f"connection {wire}: no block {end!r}")
-            if src is None or dst is None:
-                continue
-            outs, ins = names(src, wire.src_var), names(dst, wire.dst_var)
-            if not outs:
-                problems.append(f"connection {wire}: {wire.src} has no variable {wire.src_var!r}")
-                continue
-            if not ins:
-                problems.append(f"connection {wire}: {wire.dst} has no variable {wire.dst_var!r}")
-                continue
-            if len(outs) != len(ins):
-                problems.append(f"connection {wire}: {len(outs)} source variables for {len(ins)} inputs")
-                continue
-            for o, i in zip(outs, ins):
-                vo, vi = src.variables[o], dst.variables[i]
-                where = f"connection {wire.src}.{o} -> {wire.dst}.{i}"
-                if vo.causality != "output":
-                    problems.append(f"{where}: {wire.src}.{o} is a {vo.causality}, not an output")
-                if vi.causality != "input":
-                    problems.append(f"{where}: {wire.dst}.{i} is a {vi.causality}, not an input")
-                if vo.type != vi.type:
-                    problems.append(f"{where}: type mismatch ({vo.type} -> {vi.type})")
-                uo, ui = _unit(vo), _unit(vi)
-                if uo and ui and uo != ui:
-                    problems.append(f"{where}: unit mismatch ({uo} -> {ui})")
-                key = (wire.dst, i)
-                if key in driven:
-                    problems.append(f"input {wire.dst}.{i} is driven twice: by {driven[key]} and {wire.src}.{o}")
-                driven[key] = f"{wire.src}.{o}"
-                self.links.append((wire.src, o, wire.dst, i))
-
-        problems += self._algebraic_loops()
-        if problems:
-            raise DiagramError(s.name, problems)
-
-        self.warnings = []
-        for name, node in self.nodes.items():
-            for v in node.md.modelVariables:
-                if v.causality == "input" and (name, v.name) not in driven:
-                    self.warnings.append(f"input {name}.{v.name} is not connected: it keeps its start value {v.start}")
-        self.order = self._evaluation_order()
-        self._checked = True
-        return self.warnings
-
-    def _algebraic_loops(self) -> list[str]:
-        """Cycles through direct feedthrough, on the variable graph: output -> wired input ->
-        the outputs of that block depending on it."""
-        succ: dict[tuple, list[tuple]] = {}
-        for src, o, dst, i in self.links:
-            for out, deps in self.nodes[dst].feedthrough.items():
-                if i in deps:
-                    succ.setdefault((src, o), []).append((dst, out))
-        problems, state, stack = [], {}, []
-
-        def visit(v):
-            state[v] = 1
-            stack.append(v)
-            for w in succ.get(v, []):
-                if state.get(w) == 1:
-                    cycle = stack[stack.index(w):] + [w]
-                    problems.append("algebraic loop through direct feedthrough: "
-                                    + " -> ".join(f"{b}.{n}" for b, n in cycle))
-                elif w not in state:
-                    visit(w)
-            stack.pop()
-            state[v] = 2
-
-        for v in list(succ):
-            if v not in state:
-                visit(v)
-        return problems[:1] if problems else []
-
-    def _evaluation_order(self) -> list[str]:
-        """Blocks in an order where every feedthrough input is produced before it is read."""
-        names = [b.name for b in self.system.blocks]
-        after: dict[str, set[str]] = {n: set() for n in names}
-        for src, o, dst, i in self.links:
-            if src != dst and any(i in deps for deps in self.nodes[dst].feedthrough.values()):
-                after[dst].add(src)
-        order, done = [], set()
-        while len(order) < len(names):
-            ready = [n for n in names if n not in done and after[n] <= done]
-            if not ready:
-                stuck = [n for n in names if n not in done]
-                raise DiagramError(self.system.name, [
-                    "blocks feed each other's feedthrough inputs in a cycle and cannot be ordered: "
-                    + ", ".join(stuck)])
-            order.append(ready[0])
-            done.add(ready[0])
-        return order
+    @property
+    def warnings(self) -> list[str]:
+        """The diagram's warnings ([] before :meth:`check`)."""
+        return self.plan.warnings if self.plan is not None else []
 
     # -- run ----------------------------------------------------------------------------------------
     def run(self, stop_time: float | None = None, step: float | None = None,
@@ -304,17 +127,37 @@ class Master:
             csv_path: str | Path | None = None) -> Result:
         """Initialize every block and step the diagram from ``start_time`` to ``stop_time``.
 
-        On a failure, raises SimulationError naming the block, the time and the FMU's message;
-        its ``result`` holds every point recorded so far (also written to ``csv_path`` if given).
+        Parameters
+        ----------
+        stop_time, step : float, optional
+            Run end and communication step (s); default the system's.
+        algorithm : {"gauss-seidel", "jacobi"}, optional
+            Default the system's.
+        start_time : float
+            (s).
+        csv_path : str or Path, optional
+            Where to write the result (also on a failure, with the points recorded so far).
+
+        Returns
+        -------
+        Result
+            Every recorded output at ``start_time + k step``, k = 0 .. n, shape (n + 1, m),
+            with the outputs' units.
+
+        Raises
+        ------
+        SimulationError
+            Naming the block, the time and the FMU's message; its ``result`` holds every point
+            recorded so far.
         """
-        s = self.system
-        stop_time = s.stop_time if stop_time is None else float(stop_time)
-        h = s.step if step is None else float(step)
-        algorithm = s.algorithm if algorithm is None else algorithm
+        system = self.system
+        stop_time = system.stop_time if stop_time is None else float(stop_time)
+        h = system.step if step is None else float(step)
+        algorithm = system.algorithm if algorithm is None else algorithm
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(ALGORITHMS)}")
         n_steps = step_count(start_time, stop_time, h)
-        if not self._checked:
+        if self.plan is None:
             self.check()
         try:
             self._instantiate(start_time, stop_time)
@@ -322,7 +165,7 @@ class Master:
         finally:
             self.close()
 
-    def _instantiate(self, t0: float, t_end: float) -> None:
+    def _instantiate(self, start_time: float, stop_time: float) -> None:
         self.blocks = {}
         for name in self.order:
             node = self.nodes[name]
@@ -332,44 +175,50 @@ class Master:
                 raise SimulationError(str(exc), name, None, None) from None
             self.blocks[name] = block
             try:
-                block.initialize(t0, node.spec.parameters, stop_time=t_end)
+                block.initialize(start_time, node.spec.parameters, stop_time=stop_time)
             except FMUError as exc:
-                raise SimulationError(f"{exc}", name, t0, None) from None
+                raise SimulationError(f"{exc}", name, start_time, None) from None
 
-    def _layout(self):
-        """Signal vectors, ports and recorded columns."""
-        real_out, bool_out = [], []
+    def _layout(self) -> None:
+        """Signal vectors, ports, recorded columns and their units."""
+        real_outputs, boolean_outputs = [], []          # (instance, ScalarVariable), evaluation order
         for name in self.order:
-            for v in self.nodes[name].md.modelVariables:
-                if v.causality == "output" and v.type == "Real":
-                    real_out.append((name, v.name, v.valueReference))
-                elif v.causality == "output" and v.type == "Boolean":
-                    bool_out.append((name, v.name, v.valueReference))
-        self.sig = np.zeros(len(real_out))
-        self.bsig = np.zeros(len(bool_out), dtype=np.int32)
-        ridx = {(b, n): k for k, (b, n, _) in enumerate(real_out)}
-        bidx = {(b, n): k for k, (b, n, _) in enumerate(bool_out)}
+            for variable in self.nodes[name].model_description.modelVariables:
+                if variable.causality == "output" and variable.type == "Real":
+                    real_outputs.append((name, variable))
+                elif variable.causality == "output" and variable.type == "Boolean":
+                    boolean_outputs.append((name, variable))
+        self.real_signals = np.zeros(len(real_outputs))
+        self.boolean_signals = np.zeros(len(boolean_outputs), dtype=np.int32)
+        real_index = {(block, v.name): k for k, (block, v) in enumerate(real_outputs)}
+        boolean_index = {(block, v.name): k for k, (block, v) in enumerate(boolean_outputs)}
+        rank = {name: k for k, name in enumerate(self.order)}
         self.ports = {}
-        rank = {n: k for k, n in enumerate(self.order)}
         for name in self.order:
-            rows = [k for k, (b, _, _) in enumerate(real_out) if b == name]
-            brows = [k for k, (b, _, _) in enumerate(bool_out) if b == name]
-            get_r = _Port([real_out[k][2] for k in rows], self.sig[rows[0]:rows[-1] + 1] if rows else np.zeros(0),
-                          ctypes.c_double)
-            get_b = _Port([bool_out[k][2] for k in brows], self.bsig[brows[0]:brows[-1] + 1] if brows
-                          else np.zeros(0, dtype=np.int32), ctypes.c_int)
+            variables = self.nodes[name].variables
+            # each block's outputs are contiguous in the signal vectors (outputs in evaluation order)
+            real_rows = [k for k, (block, _) in enumerate(real_outputs) if block == name]
+            boolean_rows = [k for k, (block, _) in enumerate(boolean_outputs) if block == name]
+            get_real = _Port([real_outputs[k][1].valueReference for k in real_rows],
+                             _rows(self.real_signals, real_rows), ctypes.c_double)
+            get_boolean = _Port([boolean_outputs[k][1].valueReference for k in boolean_rows],
+                                _rows(self.boolean_signals, boolean_rows), ctypes.c_int)
             # Inputs from blocks evaluated earlier are set before this block's outputs are read;
             # inputs from blocks evaluated later cannot affect those outputs (the order is
             # topological in the feedthrough graph) and are set after the pass, before doStep.
-            links = [lk for lk in self.links if lk[2] == name]
-            early = _Inputs([lk for lk in links if rank[lk[0]] < rank[name]], self.nodes[name].variables, ridx, bidx)
-            late = _Inputs([lk for lk in links if rank[lk[0]] >= rank[name]], self.nodes[name].variables, ridx, bidx)
-            self.ports[name] = (get_r, get_b, early, late)
-        self.real_names = [f"{b}.{n}" for b, n, _ in real_out]
-        self.bool_names = [f"{b}.{n}" for b, n, _ in bool_out]
-        columns = self.real_names + self.bool_names
+            links = [link for link in self.links if link.target == name]
+            early = _Inputs([link for link in links if rank[link.source] < rank[name]], variables,
+                            real_index, boolean_index)
+            late = _Inputs([link for link in links if rank[link.source] >= rank[name]], variables,
+                           real_index, boolean_index)
+            self.ports[name] = (get_real, get_boolean, early, late)
+        self.real_names = [f"{block}.{v.name}" for block, v in real_outputs]
+        self.boolean_names = [f"{block}.{v.name}" for block, v in boolean_outputs]
+        units = {f"{block}.{v.name}": variable_unit(v) for block, v in real_outputs + boolean_outputs}
+        columns = self.real_names + self.boolean_names
         keep = select(columns, self.record)
         self.columns = [columns[k] for k in keep]
+        self.units = {column: units[column] for column in self.columns if units[column]}
         self.keep = np.array(keep, dtype=np.intp)
 
     def _operations(self, algorithm: str):
@@ -378,55 +227,67 @@ class Master:
         Gauss-Seidel: for each block in evaluation order, set its inputs from blocks evaluated
         before it, then read its outputs; after the pass, set the inputs that come from blocks
         evaluated later. Jacobi: read every output, then set every input.
+
+        Returns
+        -------
+        first, exchange : list of callable
+            The exchange at the first point (always Gauss-Seidel: a consistent start) and at
+            every later point; each op takes no argument.
+        steps : list of callable
+            ``op(t, h)``: one doStep per block, in evaluation order.
         """
-        sig, bsig = self.sig, self.bsig
-        early, pull, late, steps = [], [], [], []
+        real_signals, boolean_signals = self.real_signals, self.boolean_signals
+        early, reads, late, steps = [], [], [], []
         for name in self.order:
-            fn = _Raw(self.blocks[name].slave)
-            get_r, get_b, inputs_early, inputs_late = self.ports[name]
-            ops = []
-            for port, f, call in ((get_r, fn.get_real, "fmi2GetReal"), (get_b, fn.get_bool, "fmi2GetBoolean")):
-                if port.n:
-                    ops.append(_get(f, fn.c, port, name, call))
-            pull.append(ops)
-            early.append(_sets(fn, inputs_early, sig, bsig, name))
-            late.append(_sets(fn, inputs_late, sig, bsig, name))
-            steps.append(_step(fn, name))
-        gauss_seidel = [op for e, p in zip(early, pull) for op in e + p] + [op for ops in late for op in ops]
+            functions = _Fmi2Functions(self.blocks[name].slave)
+            get_real, get_boolean, inputs_early, inputs_late = self.ports[name]
+            block_reads = []
+            for port, function, call in ((get_real, functions.get_real, "fmi2GetReal"),
+                                         (get_boolean, functions.get_boolean, "fmi2GetBoolean")):
+                if port.count:
+                    block_reads.append(_get(function, functions.component, port, name, call))
+            reads.append(block_reads)
+            early.append(_sets(functions, inputs_early, real_signals, boolean_signals, name))
+            late.append(_sets(functions, inputs_late, real_signals, boolean_signals, name))
+            steps.append(_step(functions, name))
+        gauss_seidel = ([op for sets, gets in zip(early, reads) for op in sets + gets]
+                        + [op for sets in late for op in sets])
         if algorithm == "gauss-seidel":
             return gauss_seidel, gauss_seidel, steps
-        jacobi = [op for ops in pull for op in ops] + [op for e, lt in zip(early, late) for op in e + lt]
+        jacobi = ([op for gets in reads for op in gets]
+                  + [op for sets_early, sets_late in zip(early, late) for op in sets_early + sets_late])
         return gauss_seidel, jacobi, steps     # Jacobi, too, starts from a consistent first exchange
 
     def _loop(self, t0: float, h: float, n_steps: int, algorithm: str, csv_path) -> Result:
         self._layout()
-        sig, bsig = self.sig, self.bsig
-        nr = len(sig)
-        row = np.zeros(nr + len(bsig))
+        real_signals, boolean_signals = self.real_signals, self.boolean_signals
+        n_real = len(real_signals)
+        row = np.zeros(n_real + len(boolean_signals))
         record_all = np.array_equal(self.keep, np.arange(len(row)))
-        rec = np.empty((n_steps + 1, len(self.keep)))
+        recorded = np.empty((n_steps + 1, len(self.keep)))
         times = t0 + h * np.arange(n_steps + 1)
         first, exchange, steps = self._operations(algorithm)
         every = max(1, n_steps // 20)
-        t, k, n_rec = t0, 0, 0
+        t, n_recorded = t0, 0
         wall = _time.perf_counter()
         try:
             for k in range(n_steps + 1):
                 t = times[k]
                 for op in (first if k == 0 else exchange):    # Jacobi, too, starts consistent
                     op()
-                if not math.isfinite(sig.dot(sig)) and not np.isfinite(sig).all():
-                    bad = self.real_names[int(np.flatnonzero(~np.isfinite(sig))[0])]
+                if not math.isfinite(real_signals.dot(real_signals)) and not np.isfinite(real_signals).all():
+                    index = int(np.flatnonzero(~np.isfinite(real_signals))[0])
+                    bad = self.real_names[index]
                     raise _Failure(bad.split(".")[0], f"output {bad} is not finite "
-                                   f"({sig[self.real_names.index(bad)]}) at t = {t:.9g} s")
+                                   f"({real_signals[index]}) at t = {t:.9g} s")
                 if record_all:
-                    rec[k, :nr] = sig
-                    rec[k, nr:] = bsig
+                    recorded[k, :n_real] = real_signals
+                    recorded[k, n_real:] = boolean_signals
                 else:
-                    row[:nr] = sig
-                    row[nr:] = bsig
-                    rec[k] = row[self.keep]
-                n_rec = k + 1
+                    row[:n_real] = real_signals
+                    row[n_real:] = boolean_signals
+                    recorded[k] = row[self.keep]
+                n_recorded = k + 1
                 if k == n_steps:
                     break
                 for op in steps:
@@ -441,50 +302,118 @@ class Master:
                            + (": " + logged[-1] if logged else f" (status {exc.message})"))
             else:
                 message = f"{exc.block}: {exc.message}"
-            result = Result(times[:n_rec].copy(), list(self.columns), rec[:n_rec].copy(),
-                            {"failed": message, "algorithm": algorithm, "step": h})
+            result = Result(times[:n_recorded].copy(), list(self.columns), recorded[:n_recorded].copy(),
+                            {"failed": message, "algorithm": algorithm, "step": h}, dict(self.units))
             if csv_path is not None:
                 result.to_csv(csv_path)
-            raise SimulationError(message + (f"\nresults up to t = {times[n_rec - 1]:.9g} s kept"
-                                             + (f" in {csv_path}" if csv_path else "") if n_rec else ""),
+            raise SimulationError(message + (f"\nresults up to t = {times[n_recorded - 1]:.9g} s kept"
+                                             + (f" in {csv_path}" if csv_path else "") if n_recorded else ""),
                                   exc.block, float(t), result) from None
-        result = Result(times, list(self.columns), rec,
+        result = Result(times, list(self.columns), recorded,
                         {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall,
-                         "order": list(self.order)})
+                         "order": list(self.order)}, dict(self.units))
         if csv_path is not None:
             result.to_csv(csv_path)
         return result
 
     def close(self) -> None:
-        for b in self.blocks.values():
-            b.close()
+        """Terminate and free every instantiated block. Safe to call twice."""
+        for block in self.blocks.values():
+            block.close()
         self.blocks = {}
 
 
+# -- the exchange ----------------------------------------------------------------------------------
+def _rows(signals: np.ndarray, rows: list[int]) -> np.ndarray:
+    """The contiguous slice ``signals[rows[0] : rows[-1] + 1]`` (a view), or an empty array."""
+    return signals[rows[0]:rows[-1] + 1] if rows else np.zeros(0, dtype=signals.dtype)
+
+
+class _Port:
+    """Preallocated ctypes views for one batched get or set of one type on one block.
+
+    Parameters
+    ----------
+    references : list of int
+        Value references, length n.
+    buffer : ndarray, shape (n,)
+        float64 for Real, int32 for Boolean; the FMI call reads or writes it in place.
+    ctype : ctypes type
+        ``c_double`` or ``c_int``, matching ``buffer``.
+    """
+
+    def __init__(self, references: list[int], buffer: np.ndarray, ctype):
+        self.count = len(references)
+        self.references = (ctypes.c_uint * max(self.count, 1))(*references)
+        self.buffer = buffer
+        self.values = (ctype * self.count).from_buffer(buffer) if self.count else None
+
+
 class _Inputs:
-    """The wired inputs of one block fed in one phase: value references, buffers, sources."""
+    """The wired inputs of one block fed in one phase: ports, and where in the signal vectors
+    their values come from."""
 
-    def __init__(self, links, variables, ridx, bidx):
-        rl = [lk for lk in links if variables[lk[3]].type == "Real"]
-        bl = [lk for lk in links if variables[lk[3]].type == "Boolean"]
-        self.real = _Port([variables[i].valueReference for _, _, _, i in rl], np.zeros(len(rl)), ctypes.c_double)
-        self.boolean = _Port([variables[i].valueReference for _, _, _, i in bl],
-                             np.zeros(len(bl), dtype=np.int32), ctypes.c_int)
-        self.src_r = np.array([ridx[(s, o)] for s, o, _, _ in rl], dtype=np.intp)
-        self.src_b = np.array([bidx[(s, o)] for s, o, _, _ in bl], dtype=np.intp)
-        self.last_b = b""          # bytes of the values last set (none yet)
+    def __init__(self, links: list[Link], variables: dict, real_index: dict, boolean_index: dict):
+        real_links = [link for link in links if variables[link.input].type == "Real"]
+        boolean_links = [link for link in links if variables[link.input].type == "Boolean"]
+        self.real = _Port([variables[link.input].valueReference for link in real_links],
+                          np.zeros(len(real_links)), ctypes.c_double)
+        self.boolean = _Port([variables[link.input].valueReference for link in boolean_links],
+                             np.zeros(len(boolean_links), dtype=np.int32), ctypes.c_int)
+        self.real_sources = np.array([real_index[(link.source, link.output)] for link in real_links],
+                                     dtype=np.intp)
+        self.boolean_sources = np.array([boolean_index[(link.source, link.output)] for link in boolean_links],
+                                        dtype=np.intp)
+        self.last_booleans = b""          # bytes of the Boolean values last set (none yet)
 
 
-class _Raw:
-    """A block's FMI functions as fmpy loaded them (prototypes set), called without fmpy's
-    per-call Python wrapper: the master checks the returned status itself."""
+_VALUES = ctypes.POINTER(fmi2ValueReference)
+_PROTOTYPES = {     # FMI 2.0 fmi2FunctionTypes.h
+    "fmi2GetReal": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Real)],
+    "fmi2SetReal": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Real)],
+    "fmi2GetBoolean": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Boolean)],
+    "fmi2SetBoolean": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Boolean)],
+    "fmi2DoStep": [fmi2Component, fmi2Real, fmi2Real, fmi2Boolean],
+}
+
+
+class _Fmi2Functions:
+    """The FMI 2.0 functions of the hot loop for one instance, bound once.
+
+    Taken from the FMU's shared library as fmpy loaded it: the ``dll`` (a ``ctypes.CDLL``) and
+    ``component`` attributes of fmpy's ``FMU2Slave`` (public attributes, not fmpy's private
+    table of wrapped functions). ``dll[name]`` makes a new ctypes function object, so the
+    prototypes set here (from the FMI 2.0 header) leave fmpy's own untouched.
+
+    Raises
+    ------
+    RuntimeError
+        If the installed fmpy does not provide those attributes (a clear message, at the first
+        run, instead of an AttributeError in the loop).
+    """
 
     def __init__(self, slave):
-        f = slave._functions
-        self.c = slave.component
-        self.get_real, self.set_real = f["fmi2GetReal"], f["fmi2SetReal"]
-        self.get_bool, self.set_bool = f["fmi2GetBoolean"], f["fmi2SetBoolean"]
-        self.do_step = f["fmi2DoStep"]
+        library = getattr(slave, "dll", None)
+        component = getattr(slave, "component", None)
+        if not isinstance(library, ctypes.CDLL) or component is None:
+            raise RuntimeError(
+                f"fmpy {getattr(fmpy, '__version__', '?')}: FMU2Slave has no loaded shared library "
+                "`dll` (ctypes.CDLL) and instance `component`; the master binds fmi2GetReal, "
+                "fmi2SetReal, fmi2GetBoolean, fmi2SetBoolean and fmi2DoStep from them (written "
+                "for fmpy 0.3.x)")
+        self.component = component
+        self.get_real = _bind(library, "fmi2GetReal")
+        self.set_real = _bind(library, "fmi2SetReal")
+        self.get_boolean = _bind(library, "fmi2GetBoolean")
+        self.set_boolean = _bind(library, "fmi2SetBoolean")
+        self.do_step = _bind(library, "fmi2DoStep")
+
+
+def _bind(library: ctypes.CDLL, name: str):
+    function = library[name]
+    function.argtypes = _PROTOTYPES[name]
+    function.restype = fmi2Status
+    return function
 
 
 class _Failure(Exception):
@@ -501,52 +430,49 @@ def _status(status: int) -> str:
     return STATUS[status].lower() if 0 <= status < len(STATUS) else str(status)
 
 
-def _get(f, c, port: _Port, name: str, call: str):
+def _get(function, component, port: _Port, name: str, call: str):
     """A closure reading one block's outputs of one type into the signal vector."""
-    def op(f=f, c=c, vr=port.vr, n=port.n, buf=port.c):
-        status = f(c, vr, n, buf)
+    def op(function=function, component=component, references=port.references, count=port.count,
+           values=port.values):
+        status = function(component, references, count, values)
         if status > 1:
             raise _Failure(name, _status(status), call)
     return op
 
 
-def _sets(fn: _Raw, inputs: _Inputs, sig, bsig, name: str) -> list:
+def _sets(functions: _Fmi2Functions, inputs: _Inputs, real_signals: np.ndarray,
+          boolean_signals: np.ndarray, name: str) -> list:
     """Closures setting one block's inputs (of one phase) from the signal vectors."""
     ops = []
     real, boolean = inputs.real, inputs.boolean
-    if real.n:
-        def set_real(take=sig.take, src=inputs.src_r, out=real.buffer, f=fn.set_real, c=fn.c, vr=real.vr,
-                     n=real.n, buf=real.c):
-            take(src, out=out)
-            status = f(c, vr, n, buf)
+    if real.count:
+        def set_real(take=real_signals.take, sources=inputs.real_sources, buffer=real.buffer,
+                     function=functions.set_real, component=functions.component,
+                     references=real.references, count=real.count, values=real.values):
+            take(sources, out=buffer)
+            status = function(component, references, count, values)
             if status > 1:
                 raise _Failure(name, _status(status), "fmi2SetReal")
         ops.append(set_real)
-    if boolean.n:
-        def set_boolean(take=bsig.take, src=inputs.src_b, out=boolean.buffer, f=fn.set_bool, c=fn.c,
-                        vr=boolean.vr, n=boolean.n, buf=boolean.c):
-            take(src, out=out)
-            now = out.tobytes()
-            if now != inputs.last_b:       # discrete inputs: set only when they change
-                status = f(c, vr, n, buf)
+    if boolean.count:
+        def set_boolean(take=boolean_signals.take, sources=inputs.boolean_sources, buffer=boolean.buffer,
+                        function=functions.set_boolean, component=functions.component,
+                        references=boolean.references, count=boolean.count, values=boolean.values):
+            take(sources, out=buffer)
+            now = buffer.tobytes()
+            if now != inputs.last_booleans:       # discrete inputs: set only when they change
+                status = function(component, references, count, values)
                 if status > 1:
                     raise _Failure(name, _status(status), "fmi2SetBoolean")
-                inputs.last_b = now
+                inputs.last_booleans = now
         ops.append(set_boolean)
     return ops
 
 
-def _step(fn: _Raw, name: str):
-    def op(t, h, f=fn.do_step, c=fn.c):
-        status = f(c, t, h, fmi2True)
+def _step(functions: _Fmi2Functions, name: str):
+    """A closure calling one block's fmi2DoStep(t, h)."""
+    def op(t, h, function=functions.do_step, component=functions.component):
+        status = function(component, t, h, fmi2True)
         if status > 1:
             raise _Failure(name, _status(status), "fmi2DoStep")
     return op
-
-
-def _unit(v) -> str | None:
-    if v.unit:
-        return v.unit
-    if v.declaredType is not None and getattr(v.declaredType, "unit", None):
-        return v.declaredType.unit
-    return None

@@ -82,8 +82,9 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
+from .check import plan, step_count, variable_unit
 from .diagram import System, coerce, expand, select, spread
-from .master import Master, Result, _unit, step_count
+from .result import Result
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -151,8 +152,9 @@ def _xml_bytes(root: ET.Element) -> bytes:
 def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     """Write ``system`` as an SSP 1.0 package (``.ssp`` zip) at ``path``; returns the path.
 
-    The diagram is checked first exactly as the master checks it (FMUs valid, wires typed and
-    matching, no algebraic loop): a diagram the master refuses is not exported (DiagramError).
+    The diagram is planned first exactly as the master plans it (:func:`~robofmu.system.check.plan`:
+    FMUs valid, wires typed and matching, no algebraic loop; nothing is instantiated): a diagram
+    the master refuses is not exported (DiagramError).
 
     Parameters
     ----------
@@ -164,8 +166,7 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
         Parameter sets inline in the SSD instead of ``resources/<block>.ssv`` files.
     """
     path = Path(path)
-    master = Master(system)
-    master.check()
+    planned = plan(system)
 
     # FMUs under resources/: one copy per distinct file, names made unique
     sources: dict[Path, str] = {}
@@ -181,7 +182,7 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
         used.add(name)
         sources[fmu] = name
 
-    wired = {(dst, inp) for _, _, dst, inp in master.links}
+    wired = {(link.target, link.input) for link in planned.links}
     root = ET.Element(_q("ssd:SystemStructureDescription"),
                       {"version": "1.0", "name": system.name, "generationTool": "robofmu"})
     sys_attrs = {"name": system.name}
@@ -192,12 +193,12 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     ssv_files: dict[str, bytes] = {}
     units: dict[str, object] = {}
     for spec in system.blocks:
-        node = master.nodes[spec.name]
+        node = planned.nodes[spec.name]
         fmu = system.fmu_path(spec).resolve()
         comp = ET.SubElement(elements, _q("ssd:Component"),
                              {"name": spec.name, "type": "application/x-fmu-sharedlibrary",
                               "source": f"resources/{sources[fmu]}", "implementation": "CoSimulation"})
-        ports = [v for v in node.md.modelVariables
+        ports = [v for v in node.model_description.modelVariables
                  if v.causality == "output" or (v.causality == "input" and (spec.name, v.name) in wired)]
         connectors = ET.SubElement(comp, _q("ssd:Connectors")) if ports else None
         for v in ports:     # unwired inputs: none (they keep their start values; fmpy.ssp could not take them)
@@ -207,10 +208,10 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
                                  "support (libcosim cannot take SSP enumerations either)")
             con = ET.SubElement(connectors, _q("ssd:Connector"), {"name": v.name, "kind": v.causality})
             attrs = {}
-            if kind == "Real" and _unit(v):
-                attrs["unit"] = _unit(v)
+            if kind == "Real" and variable_unit(v):
+                attrs["unit"] = variable_unit(v)
             ET.SubElement(con, _q(f"ssc:{kind}"), attrs)
-        for u in node.md.unitDefinitions:
+        for u in node.model_description.unitDefinitions:
             units.setdefault(u.name, u)
         values = _parameter_values(spec.name, node.variables, spec.parameters)
         if values:
@@ -226,8 +227,8 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
                               {"type": "application/x-ssp-parameter-set", "source": source})
                 ssv_files[source] = _xml_bytes(_parameter_set(None, set_name, values))
 
-    connections = ET.SubElement(sys_el, _q("ssd:Connections")) if master.links else None
-    for src, out, dst, inp in master.links:
+    connections = ET.SubElement(sys_el, _q("ssd:Connections")) if planned.links else None
+    for src, out, dst, inp in planned.links:
         ET.SubElement(connections, _q("ssd:Connection"),
                       {"startElement": src, "startConnector": out, "endElement": dst, "endConnector": inp})
 
@@ -282,14 +283,9 @@ def _fmpy_parameter_set(ssd):
                 continue
             pset = binding.parameterValues[0]     # as libcosim: the first set of a binding
             for p in pset.parameters:
-                if p.type == "Real":
-                    value = float(p.value)
-                elif p.type == "Integer":
-                    value = int(p.value)
-                elif p.type == "Boolean":
-                    value = p.value.strip().lower() in ("true", "1")
-                else:
+                if p.type not in ("Real", "Integer", "Boolean"):
                     raise NotImplementedError(f"{comp.name}.{p.name}: fmpy.ssp cannot set a {p.type} parameter")
+                value = coerce(p.type, p.value, f"{comp.name}.{p.name}")
                 out.parameters.append(Parameter(name=f"{comp.name}.{p.name}", type=p.type, value=value))
     # fmpy matches a parameter to a component by string prefix: "plant2.x" also starts with "plant"
     clash = [(a, b) for a in names for b in names if a != b and b.startswith(a)]
@@ -303,7 +299,7 @@ def run_ssp_fmpy(path: str | Path, stop_time: float, step: float, start_time: fl
     """Simulate an SSP with ``fmpy.ssp.simulation.simulate_ssp`` (Jacobi, see the module notes).
 
     Parameter bindings of the SSD are applied (fmpy would ignore them) as start values before
-    initialization. Returns a :class:`~robofmu.system.master.Result` with the output connectors
+    initialization. Returns a :class:`~robofmu.system.result.Result` with the output connectors
     (``instance.variable``, Booleans as 0/1) matching ``record`` (fnmatch patterns; default
     all), at t0 + h .. t0 + n h (fmpy records no row for the start time).
     """
@@ -344,7 +340,7 @@ def run_ssp_libcosim(path: str | Path, stop_time: float, step: float, start_time
     """Simulate an SSP with libcosim's fixed-step algorithm (see the module notes).
 
     ``start_time`` must be the SSD's DefaultExperiment start time (libcosim starts there).
-    Returns a :class:`~robofmu.system.master.Result` with the Real outputs matching ``record``
+    Returns a :class:`~robofmu.system.result.Result` with the Real outputs matching ``record``
     (fnmatch patterns on ``instance.variable``; default all Real outputs) at t0, t0 + h, ..,
     t0 + n h, recorded by a time-series observer (Boolean outputs cannot be recorded).
     """

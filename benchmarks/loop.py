@@ -1,15 +1,14 @@
-"""Benchmark: the whole chess-pd task (13 s) through the robofmu master, the same block logic in one
-Python loop without FMI, and libcosim on the SSP export of the same diagram.
+"""Benchmark: a whole experiment (default chess-pd, 13 s) through the robofmu master, the same
+block logic in one Python loop without FMI, and libcosim on the SSP export of the same diagram.
 
-    .venv/bin/python benchmarks/loop.py [--fmus fmus] [--steps 0.001 0.005] [--stop 13]
+    .venv/bin/python benchmarks/loop.py [--experiment chess-pd] [--fmus fmus] [--steps 0.001 0.005] [--stop 13]
 
 Runners (each in a fresh child process, one after the other):
 
 - ``robofmu``: ``Master(system).run(stop, h)`` (Gauss-Seidel), every output recorded;
-- ``in-process``: :func:`robofmu.system.convergence.sampled_loop`, the FMI-free logic
-  (WaypointTrajectory.evaluate and grip, make_ik(robot).solve, ComputedTorque.torque/advance,
-  Plant.step) called in the master's order, the same outputs recorded into a preallocated
-  array: it should reproduce the master exactly (the correctness lines print the difference);
+- ``in-process``: :meth:`robofmu.system.replica.InProcessDiagram.sampled`, the FMUs' own
+  FMI-free block logic called in the master's order, the same outputs recorded into a
+  preallocated array: it reproduces the master exactly (the correctness lines print the difference);
 - ``libcosim``: :func:`robofmu.system.ssp.run_ssp_libcosim` on ``export_ssp(system)``
   (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
   observer, Booleans cannot be).
@@ -36,7 +35,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-EXPERIMENT = "chess-pd"
 RUNNERS = ("robofmu", "in-process", "libcosim")
 
 
@@ -57,12 +55,13 @@ def _peak_mb() -> float:
 
 
 # -- one runner in this (child) process ------------------------------------------------------------------
-def child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None, out: Path) -> dict:
+def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None,
+          out: Path) -> dict:
     import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
     from robofmu.system.experiment import load
     from robofmu.system.master import Master
 
-    system = load(EXPERIMENT, fmu_dir=fmu_root)
+    system = load(experiment, fmu_dir=fmu_root)
     n_steps = int(round(stop / h))
     if runner == "libcosim":
         import libcosimpy.CosimExecution  # noqa: F401  (loaded before the "imports" mark, as for the others)
@@ -73,10 +72,9 @@ def child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None, 
         loop = result.info["wall_time"]
         times, columns, data = result.time, result.columns, result.data
     elif runner == "in-process":
-        from robofmu.system.convergence import sampled_loop
-        from robofmu.system.reference import LoopSetup
+        from robofmu.system.replica import InProcessDiagram
 
-        result = sampled_loop(LoopSetup.from_system(system), h, stop)
+        result = InProcessDiagram(system).sampled(h, stop)
         loop = result.info["wall_time"]
         times, columns, data = result.time, result.columns, result.data
     elif runner == "libcosim":
@@ -94,8 +92,8 @@ def child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None, 
             "peak_mb": peak, "imports_mb": imports_mb}
 
 
-def run_child(runner: str, h: float, stop: float, fmu_root: Path, ssp: Path, out: Path) -> dict:
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", runner, "--h", repr(h),
+def run_child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, ssp: Path, out: Path) -> dict:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--experiment", experiment, "--child", runner, "--h", repr(h),
            "--stop", repr(stop), "--fmus", str(fmu_root), "--ssp", str(ssp), "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
@@ -122,9 +120,10 @@ def max_diff(a: Path, b: Path, pattern: str | None = None) -> tuple[float, str]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fmus", default="fmus", help="FMU root folder (holds chess/*.fmu; default fmus)")
+    parser.add_argument("--experiment", default="chess-pd", help="experiment to run (default chess-pd)")
+    parser.add_argument("--fmus", default="fmus", help="FMU root folder (default fmus)")
     parser.add_argument("--steps", type=float, nargs="+", default=[1e-3, 5e-3], help="communication steps (s)")
-    parser.add_argument("--stop", type=float, default=None, help="stop time (s; default: the experiment's, 13)")
+    parser.add_argument("--stop", type=float, default=None, help="stop time (s; default: the experiment's)")
     parser.add_argument("--repeat", type=int, default=3, help="fresh processes per runner; best time kept")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--h", type=float, help=argparse.SUPPRESS)
@@ -134,7 +133,7 @@ def main(argv=None) -> int:
     fmu_root = Path(args.fmus).resolve()
 
     if args.child:
-        info = child(args.child, args.h, args.stop, fmu_root, Path(args.ssp) if args.ssp else None, Path(args.out))
+        info = child(args.experiment, args.child, args.h, args.stop, fmu_root, Path(args.ssp) if args.ssp else None, Path(args.out))
         print("RESULT " + json.dumps(info), flush=True)
         return 0
 
@@ -142,20 +141,22 @@ def main(argv=None) -> int:
     from robofmu.system.experiment import load
     from robofmu.system.ssp import export_ssp
 
-    if not (fmu_root / "chess" / "plant.fmu").is_file():
-        print(f"no FMUs in {fmu_root}/chess: run `robofmu build --out {args.fmus}` first", file=sys.stderr)
+    system = load(args.experiment, fmu_dir=fmu_root)
+    missing = [str(system.fmu_path(b)) for b in system.blocks if not system.fmu_path(b).is_file()]
+    if missing:
+        print(f"missing FMUs {', '.join(missing)}: run `robofmu build --out {args.fmus}` first", file=sys.stderr)
         return 2
-    system = load(EXPERIMENT, fmu_dir=fmu_root)
+    experiment = args.experiment
     stop = system.stop_time if args.stop is None else args.stop
     rows, checks = [], []
     with tempfile.TemporaryDirectory(prefix="robofmu-bench-") as tmp:
         tmp = Path(tmp)
-        ssp = export_ssp(system, tmp / f"{EXPERIMENT}.ssp")
+        ssp = export_ssp(system, tmp / f"{experiment}.ssp")
         for h in args.steps:
             got = {}
             for runner in RUNNERS:
                 out = tmp / f"{runner}-{h}.npz"
-                tries = [run_child(runner, h, stop, fmu_root, ssp, out)
+                tries = [run_child(experiment, runner, h, stop, fmu_root, ssp, out)
                          for _ in range(args.repeat)]
                 best = min(tries, key=lambda r: r["loop"])
                 best["wall"] = min(r["wall"] for r in tries)
@@ -169,11 +170,12 @@ def main(argv=None) -> int:
             d, c = max_diff(got["in-process"]["npz"], got["robofmu"]["npz"])
             checks.append(f"h = {h * 1e3:g} ms: in-process vs robofmu master, max |diff| over all "
                           f"{len(np.load(got['robofmu']['npz'])['columns'])} outputs = {d:.3g} ({c})")
-            d, c = max_diff(got["libcosim"]["npz"], got["robofmu"]["npz"], "plant.q[")
+            q = system.extra.get("roles", {}).get("q", "")
+            d, c = max_diff(got["libcosim"]["npz"], got["robofmu"]["npz"], f"{q}[")
             checks.append(f"h = {h * 1e3:g} ms: libcosim (Jacobi) vs robofmu master (Gauss-Seidel): "
-                          f"max |q diff| = {d:.3g} rad ({c})")
+                          f"max |q diff| = {d:.3g} (rad or m; {c})")
 
-    print(f"{EXPERIMENT}, {stop:g} s task; each runner in a fresh process\n")
+    print(f"{experiment}, {stop:g} s task; each runner in a fresh process\n")
     header = (f"{'runner':<12}{'h (ms)':>8}{'wall (s)':>10}{'per step (us)':>15}{'ratio to in-process':>21}"
               f"{'peak memory (MB)':>18}{'imports (MB)':>14}")
     print(header)

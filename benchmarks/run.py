@@ -1,10 +1,12 @@
 """Benchmark: the FMI cost of one communication step per block, beside the same logic called directly.
 
-For each chess block, one communication step is what a master does at every point: set the
-inputs (one batched call per type), doStep, get the outputs. The direct column runs the same
-FMI-free logic (robofmu.components) on the same data. Times are the best of several repeats.
+For every block of every robot, one communication step is what the master does at every point:
+set the inputs (one batched call per type), get the outputs, doStep. The direct column runs the
+block's own FMI-free logic (robofmu.components.blocks) on the same values: set the inputs,
+compute the outputs, advance. Inputs are the FMU's start values (the robot at home). Times are
+the best of several repeats.
 
-    make bench            # or: .venv/bin/python benchmarks/run.py [--fmus DIR] [--steps N]
+    make bench            # or: .venv/bin/python benchmarks/run.py [--fmus DIR] [--steps N] [ROBOT ...]
 """
 from __future__ import annotations
 
@@ -16,11 +18,8 @@ from pathlib import Path
 import numpy as np
 
 import robofmu.components  # noqa: F401  (the installed copy before any bundled one)
-from robofmu.components.control import ComputedTorque
-from robofmu.components.ik import make_ik
-from robofmu.components.plant import Plant
-from robofmu.components.robot import Robot, load_spec
-from robofmu.components.trajectory import WaypointTrajectory
+from robofmu.components.blocks import make_block
+from robofmu.components.robots import available, load_description
 from robofmu.system.fmu import Block
 
 H = 1e-3
@@ -37,106 +36,70 @@ def best_of(fn, steps: int, repeats: int) -> float:
     return best
 
 
-def cases(fmu_dir: Path):
-    spec = load_spec("chess")
-    s = spec.scenario
-    robot = Robot(spec)
-    traj = WaypointTrajectory.from_scenario(s)
-    ik = make_ik(robot)
-    x = [np.array(v) for v in traj.evaluate(2.0)]
-    q, qd, qdd = ik.solve(*x)
-    xs = np.concatenate(x).tolist()
+def one_block(path: Path, robot: str, kind: str):
+    """(FMI step, direct step) callables for one block, fed with its start values."""
+    fmu = Block(path, kind)
+    fmu.initialize()
+    reals_in = [v for v in fmu.md.modelVariables if v.causality == "input" and v.type == "Real"]
+    reals_out = [v for v in fmu.md.modelVariables if v.causality == "output" and v.type == "Real"]
+    bools_out = [v for v in fmu.md.modelVariables if v.causality == "output" and v.type == "Boolean"]
+    vin = [v.valueReference for v in reals_in]
+    values = [float(v.start) for v in reals_in]
+    vout = [v.valueReference for v in reals_out]
+    vbool = [v.valueReference for v in bools_out]
+    slave = fmu.slave
 
-    # trajectory: no inputs; outputs x_ref, xd_ref, xdd_ref, grip
-    tr = Block(fmu_dir / "trajectory.fmu", "trajectory")
-    tr.initialize()
-    v_tr = tr.vrs("x_ref", "xd_ref", "xdd_ref")
-    v_grip = tr.vrs("grip")
+    def fmi(k):
+        if vin:
+            slave.setReal(vin, values)
+        slave.getReal(vout)
+        if vbool:
+            slave.getBoolean(vbool)
+        slave.doStep(k * H, H)
 
-    def tr_fmi(k):
-        tr.slave.doStep(k * H, H)
-        tr.slave.getReal(v_tr)
-        tr.slave.getBoolean(v_grip)
+    logic = make_block(robot, kind)
+    logic.configure()
+    slots = np.array([logic.index[v.name] for v in reals_in], dtype=np.intp)
+    start = np.array(values)
 
-    def tr_direct(k):
-        traj.evaluate((k + 1) * H)
-        traj.grip((k + 1) * H)
+    def direct(k):
+        logic.values[slots] = start
+        logic.output(k * H)
+        logic.advance(k * H, H)
 
-    yield "trajectory", tr_direct, tr_fmi, tr
-
-    ikb = Block(fmu_dir / "ik.fmu", "ik")
-    ikb.initialize()
-    v_in, v_out, v_r = ikb.vrs("x_ref", "xd_ref", "xdd_ref"), ikb.vrs("q_ref", "qd_ref", "qdd_ref"), ikb.vrs("reachable")
-
-    def ik_fmi(k):
-        ikb.slave.setReal(v_in, xs)
-        ikb.slave.getReal(v_out)
-        ikb.slave.getBoolean(v_r)
-        ikb.slave.doStep(k * H, H)
-
-    def ik_direct(k):
-        ik.solve(*x)
-
-    yield "ik", ik_direct, ik_fmi, ikb
-
-    ct = Block(fmu_dir / "controller.fmu", "controller")
-    ct.initialize()
-    law = ComputedTorque(Robot(spec), 400.0, 20.0)
-    v_cin, v_tau, v_g = ct.vrs("q_ref", "qd_ref", "qdd_ref", "q", "qd"), ct.vrs("tau"), ct.vrs("grip")
-    cin = np.concatenate([q, qd, qdd, q + 1e-3, qd]).tolist()
-
-    def ct_fmi(k):
-        ct.slave.setReal(v_cin, cin)
-        ct.slave.setBoolean(v_g, [False])
-        ct.slave.getReal(v_tau)
-        ct.slave.doStep(k * H, H)
-
-    def ct_direct(k):
-        law.torque(q, qd, qdd, q + 1e-3, qd)
-        law.advance(q, q + 1e-3, H)
-
-    yield "controller", ct_direct, ct_fmi, ct
-
-    pl = Block(fmu_dir / "plant.fmu", "plant")
-    pl.initialize()
-    plant = Plant(Robot(spec), q, np.zeros(4), payload_mass=0.03)
-    tau = robot.gravity_torque(q)
-    v_tau_in, v_pg, v_y = pl.vrs("tau"), pl.vrs("grip"), pl.vrs("q", "qd")
-    taus = tau.tolist()
-
-    def pl_fmi(k):
-        pl.slave.setReal(v_tau_in, taus)
-        pl.slave.setBoolean(v_pg, [False])
-        pl.slave.doStep(k * H, H)
-        pl.slave.getReal(v_y)
-
-    def pl_direct(k):
-        plant.set_grip(False)
-        plant.step(tau, H, k * H)
-
-    yield "plant", pl_direct, pl_fmi, pl
+    return fmu, fmi, direct
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fmus", default="fmus/chess", help="folder of the chess FMUs (default fmus/chess)")
-    parser.add_argument("--steps", type=int, default=2000, help="communication steps per repeat")
+    parser.add_argument("robots", nargs="*", help="robots (default: all described)")
+    parser.add_argument("--fmus", default="fmus", help="FMU root folder (default fmus)")
+    parser.add_argument("--steps", type=int, default=2000, help="steps per repeat")
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args(argv)
-    fmu_dir = Path(args.fmus)
-    if not (fmu_dir / "plant.fmu").is_file():
-        print(f"no FMUs in {fmu_dir}: run `make fmus` first", file=sys.stderr)
-        return 2
-    print(f"One communication step (h = {H * 1e3:g} ms): set inputs, doStep, get outputs; "
-          f"best of {args.repeats} x {args.steps} steps\n")
-    header = f"{'block':<12}{'direct (us)':>13}{'FMI (us)':>11}{'FMI/direct':>12}{'overhead (us)':>15}"
+    root = Path(args.fmus)
+    robots = args.robots or available()
+    rows = []
+    for robot in robots:
+        for kind in load_description(robot).blocks:
+            path = root / robot / f"{kind}.fmu"
+            if not path.is_file():
+                print(f"no {path}: run `robofmu build --out {root}` first", file=sys.stderr)
+                return 2
+            fmu, fmi, direct = one_block(path, robot, kind)
+            try:
+                t_fmi = best_of(fmi, args.steps, args.repeats)
+                t_direct = best_of(direct, args.steps, args.repeats)
+            finally:
+                fmu.close()
+            rows.append((robot, kind, t_direct * 1e6, t_fmi * 1e6, t_fmi / t_direct))
+    header = f"{'robot':<8}{'block':<12}{'direct (us)':>13}{'through FMI (us)':>18}{'ratio':>8}"
     print(header)
     print("-" * len(header))
-    for name, direct, fmi, block in cases(fmu_dir):
-        d = best_of(direct, args.steps, args.repeats)
-        f = best_of(fmi, args.steps, args.repeats)
-        print(f"{name:<12}{d * 1e6:>13.1f}{f * 1e6:>11.1f}{f / d:>12.2f}{(f - d) * 1e6:>15.1f}")
-        block.close()
+    for robot, kind, direct_us, fmi_us, ratio in rows:
+        print(f"{robot:<8}{kind:<12}{direct_us:>13.1f}{fmi_us:>18.1f}{ratio:>8.2f}")
+    print(f"\none communication step (set inputs, get outputs, doStep) at h = {H * 1e3:g} ms; "
+          f"best of {args.repeats} x {args.steps} steps")
     return 0
 
 

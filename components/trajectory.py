@@ -3,7 +3,8 @@ and a synchronized minimum-time bang-bang in joint space.
 
 Every profile has ``dim``, ``duration``, ``breakpoints`` (the instants where its acceleration
 jumps) and ``evaluate(t, snap=True) -> (x, xd, xdd)``; it rests at its start before 0 and at its
-end after ``duration``.
+end from ``duration`` on. At a breakpoint the value is the one that holds after it (the start
+instant already accelerates; the end instant is at rest), as a sampled block holds it.
 
 LSPB: 
 A move from x0 to x1 in time T with cruise speed V (per axis, |V| in (|dx|/T, 2|dx|/T]) blends
@@ -231,7 +232,7 @@ class StraightLine:
     def path(self, t: float) -> tuple[float, float, float]:
         """Arc length (m), speed (m/s) and acceleration (m/s^2) along the line at ``t``."""
         T, t1, a = self.duration, self.t1, self.a_max
-        if t <= 0.0:
+        if t < 0.0:
             return 0.0, 0.0, 0.0
         if t >= T:
             return self.length, 0.0, 0.0
@@ -292,7 +293,7 @@ class SynchronizedBangBang:
         if snap:
             t = snap_to(self.breakpoints, t)
         zero = np.zeros(self.dim)
-        if t <= 0.0 or self.duration == 0.0:
+        if t < 0.0 or self.duration == 0.0:
             return self.q_start.copy(), zero, zero.copy()
         if t >= self.duration:
             return self.q_end.copy(), zero, zero.copy()

@@ -1,100 +1,144 @@
-"""`robofmu demo`: the flagship study of seed 002, reproduced and extended."""
+"""`robofmu demo`: the flagship studies of the source documents, reproduced and extended.
+
+What runs is data (``system/studies/demo.toml``): sections of experiments with their figures and
+tables, the accuracy study against the monolithic reference, and the step responses. This module
+knows no robot.
+"""
 from __future__ import annotations
 
+import shutil
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 from . import plots
 from .analysis import markdown_table
+from .experiment import load
+from .replica import InProcessDiagram
 from .runner import run_experiment
+from .tables import STUDIES_DIR, bangbang_table, compare_with_seed, dynamics_table
+from .units import small
 
-EXPERIMENTS = ["chess-pd", "chess-pid", "chess-pd-unknown-pawn", "chess-pid-unknown-pawn"]
+PLAN = STUDIES_DIR / "demo.toml"
 
 
-def accuracy_section(out: Path, fmu_dir, quick: bool) -> list[str]:
+def _say(text: str) -> None:
+    print(text, file=sys.stderr)
+
+
+def experiment_section(section: dict, out: Path, fmu_dir) -> tuple[list[str], list[list]]:
+    """One section: its experiments, figures, and the tables it asks for; returns the markdown
+    lines and its rows of the summary table."""
+    runs = {name: run_experiment(name, out / name, fmu_dir=fmu_dir) for name in section["experiments"]}
+    lines = [f"## {section['title']}", "", section.get("text", ""), ""]
+    summary = []
+    for name, run in runs.items():
+        m = run.metrics
+        worst = int(m.max_error.argmax())
+        factor, unit = small(m.joint_units[worst])
+        summary.append([name, f"{m.max_error[worst] * factor:.4f} {unit} (q{worst + 1})",
+                        "—" if m.tcp_error is None else f"{m.tcp_error.max() * 1e3:.4f}",
+                        ", ".join(f"{v:.3g}" for v in m.peak_effort)])
+    if len(runs) > 1:
+        roles = next(iter(runs.values())).roles
+        figure = plots.error_comparison({n: r.result for n, r in runs.items()}, roles,
+                                        out / f"{'-'.join(section['experiments'][:1])}-comparison.png",
+                                        section.get("comparison", "Tracking error"))
+        tcp = {n: (r.result.time, r.metrics.tcp_error) for n, r in runs.items() if r.metrics.tcp_error is not None}
+        lines += [f"![comparison]({figure.name})", ""]
+        if tcp:
+            tcp_figure = plots.tcp_error(tcp, out / f"{'-'.join(section['experiments'][:1])}-task-error.png")
+            lines += [f"![task-point error]({tcp_figure.name})", ""]
+    for name, run in runs.items():
+        lines += [run.section.replace("### ", "### "), "",
+                  *[f"![{p.stem}]({name}/{p.name})" for p in run.figures], ""]
+        system = load(name, fmu_dir=fmu_dir)
+        if "seed_table" in section:
+            comparison = compare_with_seed(InProcessDiagram(system), run.roles, STUDIES_DIR / section["seed_table"])
+            lines += [f"#### {section.get('seed_table_title', 'Against the seed')}", "",
+                      comparison.markdown(), "",
+                      f"{int(comparison.differs.sum())} of {comparison.differs.size} printed values differ "
+                      "from this project's beyond the seed's last digit; why:", "",
+                      *[f"- {note}" for note in section.get("seed_table_notes", [])], ""]
+        if section.get("bangbang"):
+            lines += ["#### The synchronized bang-bang", "",
+                      bangbang_table(InProcessDiagram(system), run.roles, run.metrics.peak_effort,
+                                     run.metrics.effort_units), ""]
+        if "seed_dynamics" in section:
+            text, _ = dynamics_table(run.roles.robot, STUDIES_DIR / section["seed_dynamics"])
+            lines += ["#### Dynamics beside the seed's Lagrange derivation", "", text, ""]
+    return lines, summary
+
+
+def accuracy_section(plan: dict, out: Path, fmu_dir, quick: bool) -> list[str]:
     """Co-simulation error against the monolithic reference versus the communication step."""
     from .convergence import study
 
-    steps = (0.01, 0.005, 0.002) if quick else (0.01, 0.005, 0.002, 0.001, 0.0005)
-    print("accuracy study: chess-pd against the monolithic reference", file=sys.stderr)
-    res = study("chess-pd", steps=steps, out_dir=out / "convergence", fmu_dir=fmu_dir,
-                progress=lambda line: print("  " + line, file=sys.stderr))
-    return ["## Accuracy: co-simulation against a monolithic reference", "",
-            "The same closed loop as one ODE (continuous controller, DOP853 at rtol 1e-10, integrated "
-            "piecewise between the trajectory's discontinuities) against the co-simulation at its "
-            "communication points. The torque is held over each step (zero-order hold, an effective "
-            "delay of h/2), so the error is first order in h; Jacobi adds a step of delay through the "
-            "IK and the controller and a larger constant.", "",
-            res["table"], "", "![convergence](convergence/convergence.png)", ""]
+    steps = plan["quick_steps"] if quick else plan["steps"]
+    lines = ["## Accuracy: co-simulation against a monolithic reference", "",
+             "The same diagram as one ODE (continuous controller, DOP853 at rtol 1e-10, integrated "
+             "piecewise between the reference profile's discontinuities) against the co-simulation at "
+             "its communication points. The effort is held over each step (zero-order hold, an effective "
+             "delay of h/2), so the error is first order in h; Jacobi adds a step of delay through every "
+             "direct-feedthrough block and a larger constant.", ""]
+    for name in plan["experiments"]:
+        _say(f"accuracy study: {name} against the monolithic reference")
+        res = study(name, steps=steps, out_dir=out / "convergence" / name, fmu_dir=fmu_dir,
+                    progress=lambda line: _say("  " + line))
+        lines += [f"### {name}", "", res["table"], "", f"![convergence](convergence/{name}/convergence.png)", ""]
+    return lines
 
 
-def step_section(out: Path, fmu_dir) -> list[str]:
-    """Joint-reference steps through the controller and plant FMUs against python-control."""
-    from robofmu.components.robot import load_spec
-
+def step_section(plan: dict, out: Path, fmu_dir) -> list[str]:
+    """Joint-reference steps through each robot's controller and plant FMUs against python-control."""
     from . import stepresponse as sr
 
-    print("step responses: PD and PID seed gains, and gains designed for 0.3 s / 5 %", file=sys.stderr)
-    spec = load_spec("chess")
+    _say("step responses: each robot's seed gains against python-control")
     lines = ["## Step responses", "",
-             "A 0.02 rad step on every joint's reference through the controller and plant FMUs "
-             "(1 ms), against python-control: the continuous error dynamics, its ZOH discretization "
-             "and the sampled-data loop (a ZOH-discretized double integrator closed by the sampled "
-             "controller), which is what the FMUs implement. Metrics are taken relative to the "
-             "initial value and time of the step.", ""]
-    cases = [("PD (seed)", spec.gains("pd")), ("PID (seed)", spec.gains("pid"))]
-    design = sr.design_gains(0.3, 5.0)
-    cases.append(("PD designed for 0.3 s, 5 %", {"kp": design.kp, "kd": design.kd, "ki": design.ki}))
-    rows = []
-    for k, (label, g) in enumerate(cases):
-        cmp = sr.compare(sr.cosimulate_step(fmu_dir, g["kp"], g["kd"], g["ki"], step=0.02, h=1e-3))
-        fig = sr.plot_comparison(cmp, out / "step", name=f"step_{k + 1}")
-        m = cmp.metrics["joint 2"]
-        rows.append([label, f"{g['kp']:.4g}, {g['kd']:.4g}, {g['ki']:.4g}", f"{m.rise_time:.4f}",
-                     f"{m.settling_time:.4f}", f"{m.overshoot:.2f}", f"{cmp.max_deviation('sampled'):.3f}",
-                     f"{cmp.max_deviation('zoh'):.3f}"])
-        lines.append(f"![{label}](step/{fig.name})")
-    lines[-len(cases):-len(cases)] = [markdown_table(rows, [
-        "gains", "kp, kd, ki", "rise (s)", "settling (s)", "overshoot (%)",
-        "max dev. from sampled-data model (% of step)", "max dev. from c2d ZOH (% of step)"]), ""]
-    return lines + [""]
+             "A step on every joint's reference through the controller and plant FMUs (1 ms), from the "
+             "robot's home configuration, against python-control: the continuous error dynamics, its ZOH "
+             "discretization and the sampled-data loop (a ZOH-discretized double integrator closed by "
+             "the sampled controller), which is what the FMUs implement. Metrics are taken relative to "
+             "the initial value and time of the step.", ""]
+    rows, figures = [], []
+    for robot in plan["robots"]:
+        for label, result in sr.demo_cases(robot, fmu_dir, out / "step"):
+            cmp, figure = result
+            m = cmp.metrics[next(iter(cmp.metrics))]
+            rows.append([robot, label, f"{m.rise_time:.4f}", f"{m.settling_time:.4f}", f"{m.overshoot:.2f}",
+                         f"{cmp.max_deviation('sampled'):.3f}", f"{cmp.max_deviation('zoh'):.3f}"])
+            figures.append(f"![{robot} {label}](step/{figure.name})")
+    lines += [markdown_table(rows, ["robot", "gains", "rise (s)", "settling (s)", "overshoot (%)",
+                                    "max dev. from sampled-data model (% of step)",
+                                    "max dev. from c2d ZOH (% of step)"]), "", *figures, ""]
+    return lines
 
 
 def demo(out: Path, fmu_dir: str | Path = "fmus", quick: bool = False) -> int:
-    """Run every chess experiment and write ``out/report.md`` with the figures beside it."""
+    """Run the studies of ``system/studies/demo.toml`` and write ``out/report.md`` with its figures.
+
+    The output folder is replaced whole, so no stale figure stays beside new results.
+    """
     start = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    runs = {}
-    for name in EXPERIMENTS:
-        runs[name] = run_experiment(name, out / name, fmu_dir=fmu_dir)
-    results = {n: r.result for n, r in runs.items()}
-    figs = [plots.error_comparison(results, out / "tracking_error_pd_vs_pid.png"),
-            plots.tcp_error({n: (r.result.time, r.metrics.tcp_error) for n, r in runs.items()},
-                            out / "tcp_error.png")]
-    rows = []
-    for n, r in runs.items():
-        m = r.metrics
-        ev = list(m.events.values())
-        rows.append([n, f"{max(m.max_error) * 1e3:.3f}", f"{max(m.rms_error) * 1e3:.3f}",
-                     f"{max(m.tcp_error) * 1e3:.3f}", f"{ev[0][1] * 1e3:.3f}", f"{ev[1][1] * 1e3:.3f}",
-                     f"{max(m.peak_torque):.3f}"])
-    summary = markdown_table(rows, ["experiment", "max joint error (mrad)", "max RMS (mrad)",
-                                    "max TCP error (mm)", "TCP error at pick (mm)",
-                                    "TCP error at place (mm)", "peak torque (N.m)"])
-    sections = ["# robofmu demo: computed-torque control of the chess arm", "",
-                "Seed 002's Simulink study (queen's gambit, d2 -> d4) as a co-simulation of four FMUs "
-                "(trajectory -> ik -> controller -> plant), Gauss-Seidel at 1 ms.", "",
-                "## Summary", "", summary, "",
-                "![tracking error](tracking_error_pd_vs_pid.png)", "", "![TCP error](tcp_error.png)", ""]
-    for n, r in runs.items():
-        sections += [r.section.replace("### ", "## "), "",
-                     *[f"![{p.stem}]({n}/{p.name})" for p in r.figures], ""]
-    sections += accuracy_section(out, fmu_dir, quick)
-    sections += step_section(out, fmu_dir)
-    sections.append(f"_Generated by `robofmu demo` in {time.perf_counter() - start:.1f} s._")
-    (out / "report.md").write_text("\n".join(sections) + "\n")
-    print(summary)
-    print(f"\nwrote {out / 'report.md'} and {len(figs) + sum(len(r.figures) for r in runs.values())} figures "
-          f"in {out} ({time.perf_counter() - start:.1f} s)", file=sys.stderr)
+    plan = tomllib.loads(PLAN.read_text())
+    out = Path(out)
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    body, summary = [], []
+    for section in plan["sections"]:
+        lines, rows = experiment_section(section, out, fmu_dir)
+        body += lines
+        summary += rows
+    body += accuracy_section(plan["accuracy"], out, fmu_dir, quick)
+    body += step_section(plan["step_response"], out, fmu_dir)
+    table = markdown_table(summary, ["experiment (1 ms, Gauss-Seidel)", "max joint error", "max task-point error (mm)",
+                                     "peak efforts (N·m or N, per joint)"])
+    report = [f"# {plan['title']}", "", plan.get("intro", ""), "", "## Summary", "", table, "", *body,
+              f"_Generated by `robofmu demo` in {time.perf_counter() - start:.1f} s._"]
+    (out / "report.md").write_text("\n".join(report) + "\n")
+    print(table)
+    figures = len(list(out.rglob("*.png")))
+    _say(f"\nwrote {out / 'report.md'} and {figures} figures in {out} ({time.perf_counter() - start:.1f} s)")
     return 0

@@ -1,4 +1,5 @@
-"""The monolithic reference (continuous controller) and the co-simulation's convergence to it."""
+"""The in-process diagram: a replica of the master bit for bit, and the monolithic reference
+(continuous controller) the co-simulation converges to, for every robot's experiment."""
 from __future__ import annotations
 
 import json
@@ -6,136 +7,165 @@ import json
 import numpy as np
 import pytest
 
-from robofmu.components.ik import make_ik
-from robofmu.components.robot import Robot
-from robofmu.system.convergence import observed_order, sampled_loop, study
+from robofmu.components.ik import make_solver
+from robofmu.components.robots import load_description, load_model
+from robofmu.system.convergence import observed_order, study
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
-from robofmu.system.reference import LoopSetup, MonolithicLoop, discontinuities, reference_run
+from robofmu.system.replica import InProcessDiagram, block_identity
 
-T_TASK = 13.0
+EXPERIMENTS = ["chess-pd", "rrp-line", "rpp-bangbang"]
+CHESS_TASK = 13.0
 GRIP_CLOSE, GRIP_OPEN = 6.0, 11.5
 
 
-def sample_times(loop: MonolithicLoop, t_end: float, rng, k: int = 1500) -> np.ndarray:
-    """Random times plus every discontinuity and points 1 us either side of each."""
-    d = discontinuities(loop.trajectory, t_end)
-    t = np.concatenate([[0.0, t_end], rng.uniform(0.0, t_end, k), d, d - 1e-6, d + 1e-6])
+def sample_times(breaks: np.ndarray, t_end: float, rng, k: int = 1500) -> np.ndarray:
+    """Random times plus every breakpoint and points 1 us either side of each."""
+    t = np.concatenate([[0.0, t_end], rng.uniform(0.0, t_end, k), breaks, breaks - 1e-6, breaks + 1e-6])
     return np.sort(t[(t >= 0.0) & (t <= t_end)])
 
 
 @pytest.fixture(scope="module")
-def perfect_pd():
-    return MonolithicLoop(LoopSetup.from_robot("chess", "pd")).solve(T_TASK)
+def chess_pd(fmu_root):
+    diagram = InProcessDiagram(load("chess-pd", fmu_dir=fmu_root))
+    return diagram, diagram.monolithic(CHESS_TASK)
 
 
 @pytest.fixture(scope="module")
-def unknown_pawn_pd():
-    return MonolithicLoop(LoopSetup.from_robot("chess", "pd", model_knows_payload=False)).solve(T_TASK)
+def chess_unknown_pawn(fmu_root):
+    diagram = InProcessDiagram(load("chess-pd-unknown-pawn", fmu_dir=fmu_root))
+    return diagram, diagram.monolithic(CHESS_TASK)
+
+
+# -- the diagram as the FMUs describe it ---------------------------------------------------------
+def test_blocks_come_from_the_fmus_annotations(fmu_root):
+    identity = block_identity(fmu_root / "rrp" / "trajectory.fmu")
+    assert (identity["robot"], identity["kind"], identity["variant"]) == ("rrp", "trajectory", "line")
+    diagram = InProcessDiagram(load("rpp-bangbang", fmu_dir=fmu_root))
+    assert diagram.order == ["trajectory", "plant", "controller", "fk"]
+    assert type(diagram.blocks["trajectory"]).__name__ == "JointBangBangBlock"
+
+
+def test_parameters_come_from_the_fmu_start_values_and_the_experiment(fmu_root):
+    system = load("chess-pid-unknown-pawn", fmu_dir=fmu_root)
+    system.block("plant").parameters.update(q0=[0.1, 0.8, -2.3, 0.0], g=9.0)
+    blocks = InProcessDiagram(system).blocks
+    controller, plant = blocks["controller"], blocks["plant"]
+    assert [controller.get(k) for k in ("kp", "kd", "ki", "payload_mass", "g")] == [600.0, 25.0, 75.0, 0.0, 9.81]
+    assert plant.get("payload_mass") == 0.03 and plant.get("g") == 9.0
+    np.testing.assert_array_equal(plant.get("q0"), [0.1, 0.8, -2.3, 0.0])
+    assert blocks["trajectory"].get("grip_close_after_move") == 3
+    home = InProcessDiagram(load("rrp-line", fmu_dir=fmu_root)).blocks["plant"].get("q0")
+    np.testing.assert_array_equal(home, load_description("rrp").configuration("home"))
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_in_process_replica_equals_the_master_bit_for_bit(fmu_root, name):
+    """The co-simulation equals the in-process Gauss-Seidel loop in which every block advances
+    over [t_k, t_k + h] with the inputs of t_k: call for call, bit for bit."""
+    system = load(name, fmu_dir=fmu_root)
+    cosim = Master(system).run(stop_time=0.5, step=0.005)
+    replica = InProcessDiagram(system).sampled(0.005, 0.5)
+    assert sorted(cosim.columns) == sorted(replica.columns)
+    for column in cosim.columns:
+        np.testing.assert_array_equal(cosim[column], replica[column], err_msg=column)
+    assert replica.units == cosim.units
 
 
 # -- the reference itself -------------------------------------------------------------------------
-def test_discontinuities_of_the_chess_task(perfect_pd):
-    d = discontinuities(perfect_pd.trajectory, T_TASK)
-    boundaries = [1.0, 1.5, 4.5, 5.0, 6.0, 6.5, 7.5, 8.0, 10.0, 10.5, 11.5, 12.0]
+def test_breakpoints_of_the_chess_task(chess_pd):
+    diagram, mono = chess_pd
+    breaks = diagram.blocks["trajectory"].breakpoints()
+    boundaries = [0.0, 1.0, 1.5, 4.5, 5.0, 6.0, 6.5, 7.5, 8.0, 10.0, 10.5, 11.5, 12.0, 13.0]
     moves = [(0.0, 1.0), (1.5, 4.5), (5.0, 6.0), (6.5, 7.5), (8.0, 10.0), (10.5, 11.5), (12.0, 13.0)]
     blends = [t for a, b in moves for t in (a + (b - a) / 3, b - (b - a) / 3)]
-    np.testing.assert_allclose(d, np.sort(boundaries + blends), atol=1e-12)
-    assert d.size == 26 and perfect_pd.stats["pieces"] == 27
-    assert GRIP_CLOSE in d and GRIP_OPEN in d
+    np.testing.assert_allclose(breaks, np.sort(boundaries + blends), atol=1e-12)
+    assert mono.stats["pieces"] == 27
+    assert diagram.blocks["trajectory"].events() == {"grip closes": GRIP_CLOSE, "grip opens": GRIP_OPEN}
 
 
-@pytest.mark.parametrize("gains", ["pd", "pid"])
-def test_perfect_model_from_rest_on_the_trajectory_tracks_it_exactly(gains, perfect_pd, rng):
-    """Exact model, starting at rest on the trajectory: e'' + kd e' + kp e + ki z = 0 from zero
-    initial conditions, so q(t) = IK(x_ref(t)) for the whole task, and the torque is the true
-    arm's inverse dynamics along the reference (pawn included while gripped)."""
-    loop = perfect_pd if gains == "pd" else MonolithicLoop(LoopSetup.from_robot("chess", "pid")).solve(T_TASK)
-    t = sample_times(loop, T_TASK, rng)
-    e = loop.evaluate(t)
-    arm = Robot("chess")
-    ik = make_ik(Robot("chess"))
-    traj = LoopSetup.from_robot("chess").trajectory()
+def test_perfect_model_from_rest_on_the_trajectory_tracks_it_exactly(chess_pd, rng):
+    """Exact model, starting at rest on the trajectory: e'' + kd e' + kp e = 0 from zero initial
+    conditions, so q(t) = IK(x_ref(t)) for the whole task, and the torque is the true arm's
+    inverse dynamics along the reference (pawn included while gripped)."""
+    diagram, mono = chess_pd
+    trajectory = diagram.blocks["trajectory"]
+    t = sample_times(trajectory.breakpoints(), CHESS_TASK, rng)
+    ref = mono.evaluate(t)
+    arm = load_model("chess")
+    ik = make_solver(load_model("chess"))
     q_err = qd_err = tau_err = tcp_err = 0.0
     for k, tk in enumerate(t):
-        x, xd, xdd = traj.evaluate(tk)
+        x, xd, xdd = trajectory.profile.evaluate(tk)
         q, qd, qdd = ik.solve(x, xd, xdd)
-        arm.set_payload(0.03 if traj.grip(tk) else 0.0)
-        q_err = max(q_err, np.abs(e["q"][k] - q).max())
-        qd_err = max(qd_err, np.abs(e["qd"][k] - qd).max())
-        tau_err = max(tau_err, np.abs(e["tau"][k] - arm.inverse_dynamics(q, qd, qdd)).max())
-        tcp_err = max(tcp_err, np.linalg.norm(arm.fk(e["q"][k]) - x))
+        arm.set_payload(0.03 if trajectory.profile.grip(tk) else 0.0)
+        q_err = max(q_err, np.abs(ref.vector("plant.q")[k] - q).max())
+        qd_err = max(qd_err, np.abs(ref.vector("plant.qd")[k] - qd).max())
+        tau_err = max(tau_err, np.abs(ref.vector("controller.tau")[k] - arm.inverse_dynamics(q, qd, qdd)).max())
+        tcp_err = max(tcp_err, np.linalg.norm(arm.fk(ref.vector("plant.q")[k]) - x))
     assert q_err < 1e-8          # rad (observed ~1e-12)
     assert qd_err < 1e-7         # rad/s
     assert tau_err < 1e-6        # N.m
     assert tcp_err < 1e-9        # m
-    assert np.abs(e["z"]).max() < 1e-9
 
 
-def test_unknown_pawn_error_only_while_gripped_and_after(unknown_pawn_pd, perfect_pd, rng):
-    t = sample_times(unknown_pawn_pd, T_TASK, rng)
-    e = unknown_pawn_pd.evaluate(t)
-    err = np.abs(e["q"] - e["q_ref"]).max(axis=1)
-    tcp = np.linalg.norm(e["tcp"] - e["x_ref"], axis=1)
+def test_unknown_pawn_error_only_while_gripped_and_after(chess_unknown_pawn, rng):
+    diagram, mono = chess_unknown_pawn
+    t = sample_times(diagram.blocks["trajectory"].breakpoints(), CHESS_TASK, rng)
+    ref = mono.evaluate(t)
+    err = np.abs(ref.vector("plant.q") - ref.vector("ik.q_ref")).max(axis=1)
+    arm = load_model("chess")
+    tcp = np.array([arm.fk(q) for q in ref.vector("plant.q")])
+    x_ref = ref.vector("trajectory.x_ref")
+    distance = np.linalg.norm(tcp - x_ref, axis=1)
     before, held = t <= GRIP_CLOSE, (t > GRIP_CLOSE) & (t < GRIP_OPEN)
     assert err[before].max() < 1e-9
     assert err[held].max() == pytest.approx(1.275e-2, rel=5e-3)     # rad (regression value)
-    assert tcp[held].max() == pytest.approx(1.149e-3, rel=5e-3)     # m
+    assert distance[held].max() == pytest.approx(1.149e-3, rel=5e-3)     # m
     # once the pawn is released the model is exact again: the error decays like exp(-zeta wn t),
     # zeta wn = kd / 2 = 10 1/s, from ~1e-2 rad
     assert err[(t > GRIP_OPEN) & (t < GRIP_OPEN + 0.1)].max() > 1e-3
     assert err[t > GRIP_OPEN + 1.0].max() < 1e-2 * np.exp(-10.0 * 1.0) * 2
     # the pawn pulls the TCP down: a PD loop with an unknown 30 g sags below the reference
-    assert (e["tcp"][held, 2] - e["x_ref"][held, 2]).mean() < 0.0
+    assert (tcp[held, 2] - x_ref[held, 2]).mean() < 0.0
 
 
-def test_unknown_pawn_static_error_matches_gravity_mismatch():
+def test_unknown_pawn_static_error_matches_gravity_mismatch(fmu_root):
     """After a long pause with the pawn gripped, PD computed torque settles where
     kp M_model(q) e = g_true(q) - g_model(q): an independent check of the payload handling."""
-    setup = LoopSetup.from_robot("chess", "pd", model_knows_payload=False, pause=3.0)
-    loop = MonolithicLoop(setup)
-    assert loop.trajectory.grip_close_time == pytest.approx(11.0)
-    loop.solve(13.9)
-    e = loop.evaluate([13.9])
-    q = e["q"][0]
-    true, model = Robot("chess"), Robot("chess")
+    system = load("chess-pd-unknown-pawn", fmu_dir=fmu_root)
+    system.block("trajectory").parameters["pause"] = 3.0
+    diagram = InProcessDiagram(system)
+    diagram.configure()
+    assert diagram.blocks["trajectory"].events()["grip closes"] == pytest.approx(11.0)
+    ref = diagram.monolithic(13.9).evaluate([13.9])
+    q, q_ref = ref.vector("plant.q")[0], ref.vector("ik.q_ref")[0]
+    true, model = load_model("chess"), load_model("chess")
     true.set_payload(0.03)
-    predicted = np.linalg.solve(model.mass_matrix(q), true.gravity_torque(q) - model.gravity_torque(q)) / setup.kp
-    np.testing.assert_allclose(e["q_ref"][0] - q, predicted, atol=1e-10)
+    kp = diagram.blocks["controller"].get("kp")
+    predicted = np.linalg.solve(model.mass_matrix(q), true.gravity_torque(q) - model.gravity_torque(q)) / kp
+    np.testing.assert_allclose(q_ref - q, predicted, atol=1e-10)
     assert np.abs(predicted).max() > 1e-3
-    assert np.abs(e["qd"][0]).max() < 1e-9
+    assert np.abs(ref.vector("plant.qd")[0]).max() < 1e-9
 
 
-def test_setup_from_system_reads_block_parameters(fmu_dir):
-    pid = LoopSetup.from_system(load("chess-pid-unknown-pawn", fmu_dir=fmu_dir.parent))
-    assert (pid.kp, pid.kd, pid.ki) == (600.0, 25.0, 75.0)
-    assert pid.model_payload == 0.0 and pid.payload == 0.03
-    assert pid.gravity == pid.model_gravity == 9.81
-    np.testing.assert_allclose(pid.q0, make_ik(Robot("chess")).position(np.array([0.21, 0.0, 0.0])),
-                               atol=1e-15)
-    assert pid.grip_close_after_move == 3 and pid.grip_open_after_move == 6
-    system = load("chess-pd", fmu_dir=fmu_dir.parent)
-    system.block("plant").parameters.update(q0=[0.1, 0.8, -2.3, 0.0], g=9.0)
-    pd = LoopSetup.from_system(system)
-    assert (pd.kp, pd.kd, pd.ki, pd.model_payload) == (400.0, 20.0, 0.0, 0.03)
-    assert pd.gravity == 9.0 and pd.model_gravity == 9.81
-    np.testing.assert_array_equal(pd.q0, [0.1, 0.8, -2.3, 0.0])
-
-
-def test_reference_run_is_recorded_like_a_cosimulation(fmu_dir):
-    system = load("chess-pid", fmu_dir=fmu_dir.parent)
-    times = np.linspace(0.0, 2.0, 201)
-    ref = reference_run(system, times)
-    assert ref.vector("plant.q").shape == (201, 4)
-    assert ref["controller.tau[2]"].shape == (201,)
-    np.testing.assert_allclose(ref.vector("plant.q"), ref.vector("ik.q_ref"), atol=1e-9)
+@pytest.mark.parametrize("name", ["rrp-line", "rpp-bangbang"])
+def test_exact_model_reference_follows_the_joint_reference(fmu_root, name, rng):
+    """Every robot's reference from rest on its trajectory tracks the joint reference exactly."""
+    system = load(name, fmu_dir=fmu_root)
+    diagram = InProcessDiagram(system)
+    mono = diagram.monolithic(system.stop_time)
+    roles = system.extra["roles"]
+    breaks = np.concatenate([b.breakpoints() for b in diagram.blocks.values()])
+    ref = mono.evaluate(sample_times(breaks, system.stop_time, rng, 400))
+    assert np.abs(ref.vector(roles["q"]) - ref.vector(roles["q_ref"])).max() < 1e-8
 
 
 # -- the co-simulation against it ------------------------------------------------------------------
-def test_gauss_seidel_and_jacobi_converge_at_first_order(fmu_dir, tmp_path):
+def test_gauss_seidel_and_jacobi_converge_at_first_order(fmu_root, tmp_path):
     """2 s window, h = 8, 4, 2, 1 ms: the error is O(h) (zero-order hold of the torque, forward
     Euler on the integral, whole-step delays), Jacobi's constant is larger."""
-    system = load("chess-pd", fmu_dir=fmu_dir.parent)
+    system = load("chess-pd", fmu_dir=fmu_root)
     res = study(system, (0.008, 0.004, 0.002, 0.001), tmp_path, stop_time=2.0, progress=None)
     for a in ("gauss-seidel", "jacobi"):
         errs = [r["q_error"] for r in res["rows"] if r["algorithm"] == a]
@@ -152,23 +182,22 @@ def test_gauss_seidel_and_jacobi_converge_at_first_order(fmu_dir, tmp_path):
     assert "| gauss-seidel | 8 |" in (tmp_path / "convergence.md").read_text()
 
 
-def test_sampled_loop_converges_at_first_order(perfect_pd):
+@pytest.mark.parametrize("name", ["rrp-line", "rpp-bangbang"])
+def test_every_robot_converges_to_its_reference_at_first_order(fmu_root, name):
+    system = load(name, fmu_dir=fmu_root)
+    res = study(system, (0.004, 0.002, 0.001), None, algorithms=("gauss-seidel", "in-process"),
+                progress=None)
+    assert 0.9 <= res["orders"]["gauss-seidel"]["q"] <= 1.15, res["table"]
+    for gs, replica in zip(*([r for r in res["rows"] if r["algorithm"] == a] for a in ("gauss-seidel", "in-process"))):
+        assert gs["q_error"] == replica["q_error"]          # the replica is the master, bit for bit
+
+
+def test_in_process_loop_converges_at_first_order(chess_pd):
+    diagram, mono = chess_pd
     steps = (0.008, 0.004, 0.002, 0.001)
     errs = []
     for h in steps:
-        r = sampled_loop(perfect_pd.setup, h, 2.0)
-        errs.append(np.abs(r.vector("plant.q") - perfect_pd.evaluate(r.time, outputs=False)["q"]).max())
+        r = diagram.sampled(h, 2.0)
+        errs.append(np.abs(r.vector("plant.q") - mono.evaluate(r.time).vector("plant.q")).max())
     assert 0.9 <= observed_order(steps, errs) <= 1.1
     assert errs[-1] < 3e-4
-
-
-def test_gauss_seidel_applies_the_torque_of_the_same_point(fmu_dir):
-    """The co-simulation equals an in-process replay of the sampled loop in which the plant
-    integrates [t_k, t_k + h] with the torque the controller computed at t_k."""
-    system = load("chess-pd", fmu_dir=fmu_dir.parent)
-    setup = LoopSetup.from_system(system)
-    cosim = Master(system).run(stop_time=0.5, step=0.005)
-    replica = sampled_loop(setup, 0.005, 0.5)
-    assert cosim.columns == replica.columns
-    np.testing.assert_array_equal(cosim.data, replica.data)      # call for call, bit for bit
-

@@ -106,10 +106,10 @@ def main(argv: list[str] | None = None) -> int:
     from robofmu.system.stepresponse import add_step_command
     add_step_command(sub)
 
-    p = sub.add_parser("demo", help="the flagship study: every chess experiment, figures and a report",
-                       description="Run chess-pd, chess-pid (pawn known and unknown to the model), the "
-                                   "accuracy study against a monolithic reference and the step responses; "
-                                   "write figures and DIR/report.md.")
+    p = sub.add_parser("demo", help="the flagship studies of every robot: experiments, figures and a report",
+                       description="Run the studies of system/studies/demo.toml (one section per source "
+                                   "document), the accuracy study against a monolithic reference and the "
+                                   "step responses; write figures and DIR/report.md (DIR is replaced).")
     p.add_argument("--out", default="results", metavar="DIR", help="output folder (default: results)")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.add_argument("--quick", action="store_true", help="shorter accuracy study")

@@ -10,9 +10,9 @@ and maps the FMI life cycle onto the block's hooks:
 - reading outputs -> ``output(t)``, lazily, whenever inputs or time changed;
 - fmi2DoStep(t, h) -> ``advance(t, h)``; outputs then belong to t + h.
 
-It completes the model description pythonfmu writes (units, InitialUnknowns, output
-dependencies, a robofmu vendor annotation naming robot and block), turns exceptions into logged
-errors, and saves the full internal state for fmi2GetFMUstate/fmi2SetFMUstate.
+It turns exceptions into logged errors, works around pythonfmu 0.7.0 (docs/design.md), saves the
+full internal state for fmi2GetFMUstate/fmi2SetFMUstate, and has the model description pythonfmu
+writes completed by :mod:`.model_description`.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import ctypes
 import math
 import sys
 import traceback
-from xml.etree.ElementTree import Element, SubElement
+from xml.etree.ElementTree import Element
 
 import numpy as np
 from pythonfmu import Boolean, Fmi2Slave, Integer, Real, String
@@ -30,27 +30,7 @@ from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variabil
 from .. import SOURCE_HASH, check_bundle
 from ..blocks import StepRefused, block_type
 from ..robots import load_description, load_model
-
-#: SI base-unit exponents of every unit a block may use (FMI 2.0 UnitDefinitions).
-UNITS = {
-    "1": {},
-    "s": {"s": 1},
-    "m": {"m": 1},
-    "m/s": {"m": 1, "s": -1},
-    "m/s2": {"m": 1, "s": -2},
-    "rad": {"rad": 1},
-    "rad/s": {"rad": 1, "s": -1},
-    "rad/s2": {"rad": 1, "s": -2},
-    "kg": {"kg": 1},
-    "N": {"kg": 1, "m": 1, "s": -2},
-    "N.m": {"kg": 1, "m": 2, "s": -2},
-    "1/s2": {"s": -2},
-    "1/s": {"s": -1},
-    "1/s3": {"s": -3},
-}
-
-#: Tool name of the vendor annotation that tells robot and block kind of a FMU.
-VENDOR_TOOL = "robofmu"
+from .model_description import VENDOR_TOOL, complete  # noqa: F401  (VENDOR_TOOL: public here)
 
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
 _VARIABILITY = {v.name: v for v in Fmi2Variability}
@@ -295,49 +275,5 @@ class BlockSlave(Fmi2Slave):
 
     # -- model description ----------------------------------------------------------------------------
     def to_xml(self, model_options=dict()) -> Element:
-        """pythonfmu's model description, completed with units, InitialUnknowns, dependencies and
-        a vendor annotation naming robot and block."""
-        root = super().to_xml(model_options)
-        meta = {v.name: v for v in self.logic.variables}
-        used = sorted({v.unit for v in meta.values() if v.unit})
-        units = Element("UnitDefinitions")
-        for name in used:
-            unit = SubElement(units, "Unit", name=name)
-            SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
-        tags = [c.tag for c in root]
-        root.insert(tags.index("CoSimulation") + 1, units)
-        annotations = Element("VendorAnnotations")
-        tool = SubElement(annotations, "Tool", name=VENDOR_TOOL)
-        SubElement(tool, "Block", robot=self.robot_name, kind=self.block_kind,
-                   variant=self.logic.variant, source=SOURCE_HASH)
-        root.insert([c.tag for c in root].index("ModelVariables"), annotations)
-
-        index = {}
-        for i, sv in enumerate(root.find("ModelVariables"), start=1):
-            var = meta[sv.get("name")]
-            index[var.name] = i
-            if var.unit:
-                sv[0].set("unit", var.unit)
-            if var.kind == "Real" and sv[0].get("start") is not None:
-                sv[0].set("start", repr(float(var.start)))   # pythonfmu's %.16g does not round-trip
-
-        structure = root.find("ModelStructure")
-        for child in list(structure):
-            structure.remove(child)
-        outputs = [v for v in meta.values() if v.causality == "output"]
-        if outputs:
-            node = SubElement(structure, "Outputs")
-            for v in outputs:
-                attrib = {"index": str(index[v.name])}
-                if v.depends is not None:
-                    attrib["dependencies"] = " ".join(str(i) for i in sorted(index[d] for d in v.depends))
-                SubElement(node, "Unknown", attrib)
-            node = SubElement(structure, "InitialUnknowns")
-            for v in sorted(outputs, key=lambda v: index[v.name]):
-                # at initialization outputs also depend on parameters: without an explicit list
-                # the attribute is left out, which declares a dependency on every known
-                attrib = {"index": str(index[v.name])}
-                if v.initial_depends is not None:
-                    attrib["dependencies"] = " ".join(str(i) for i in sorted(index[d] for d in v.initial_depends))
-                SubElement(node, "Unknown", attrib)
-        return root
+        """pythonfmu's model description, completed (see :mod:`.model_description`)."""
+        return complete(super().to_xml(model_options), self.logic, self.robot_name, self.block_kind)

@@ -1,0 +1,76 @@
+"""Completing the model description pythonfmu writes: units, InitialUnknowns, output
+dependencies, round-trip start values and a robofmu vendor annotation naming robot and block.
+"""
+from __future__ import annotations
+
+from xml.etree.ElementTree import Element, SubElement
+
+from .. import SOURCE_HASH
+
+#: SI base-unit exponents of every unit a block may use (FMI 2.0 UnitDefinitions).
+UNITS = {
+    "1": {},
+    "s": {"s": 1},
+    "m": {"m": 1},
+    "m/s": {"m": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "rad": {"rad": 1},
+    "rad/s": {"rad": 1, "s": -1},
+    "rad/s2": {"rad": 1, "s": -2},
+    "kg": {"kg": 1},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "1/s2": {"s": -2},
+    "1/s": {"s": -1},
+    "1/s3": {"s": -3},
+}
+
+#: Tool name of the vendor annotation that tells robot and block kind of a FMU.
+VENDOR_TOOL = "robofmu"
+
+
+def complete(root: Element, logic, robot: str, kind: str) -> Element:
+    """Complete pythonfmu's ``root`` for block ``logic`` (a :class:`~robofmu.components.blocks.Block`)."""
+    meta = {v.name: v for v in logic.variables}
+    used = sorted({v.unit for v in meta.values() if v.unit})
+    units = Element("UnitDefinitions")
+    for name in used:
+        unit = SubElement(units, "Unit", name=name)
+        SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
+    tags = [c.tag for c in root]
+    root.insert(tags.index("CoSimulation") + 1, units)
+    annotations = Element("VendorAnnotations")
+    tool = SubElement(annotations, "Tool", name=VENDOR_TOOL)
+    SubElement(tool, "Block", robot=robot, kind=kind,
+               variant=logic.variant, source=SOURCE_HASH)
+    root.insert([c.tag for c in root].index("ModelVariables"), annotations)
+
+    index = {}
+    for i, sv in enumerate(root.find("ModelVariables"), start=1):
+        var = meta[sv.get("name")]
+        index[var.name] = i
+        if var.unit:
+            sv[0].set("unit", var.unit)
+        if var.kind == "Real" and sv[0].get("start") is not None:
+            sv[0].set("start", repr(float(var.start)))   # pythonfmu's %.16g does not round-trip
+
+    structure = root.find("ModelStructure")
+    for child in list(structure):
+        structure.remove(child)
+    outputs = [v for v in meta.values() if v.causality == "output"]
+    if outputs:
+        node = SubElement(structure, "Outputs")
+        for v in outputs:
+            attrib = {"index": str(index[v.name])}
+            if v.depends is not None:
+                attrib["dependencies"] = " ".join(str(i) for i in sorted(index[d] for d in v.depends))
+            SubElement(node, "Unknown", attrib)
+        node = SubElement(structure, "InitialUnknowns")
+        for v in sorted(outputs, key=lambda v: index[v.name]):
+            # at initialization outputs also depend on parameters: without an explicit list
+            # the attribute is left out, which declares a dependency on every known
+            attrib = {"index": str(index[v.name])}
+            if v.initial_depends is not None:
+                attrib["dependencies"] = " ".join(str(i) for i in sorted(index[d] for d in v.initial_depends))
+            SubElement(node, "Unknown", attrib)
+    return root

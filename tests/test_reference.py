@@ -184,11 +184,19 @@ def test_gauss_seidel_and_jacobi_converge_at_first_order(fmu_root, tmp_path):
 
 @pytest.mark.parametrize("name", ["rrp-line", "rpp-bangbang"])
 def test_every_robot_converges_to_its_reference_at_first_order(fmu_root, name):
+    """Error <= C h at every step and a least-squares order of about 1. The bang-bang switches
+    (T/2 = 0.72360 s, T = 1.44721 s) fall between communication points: the sampled controller
+    misses the acceleration step for the rest of that step (0.4 ms for h = 1 and 2 ms alike), an
+    error proportional to that miss (<= h), which scatters the local order around 1."""
     system = load(name, fmu_dir=fmu_root)
-    res = study(system, (0.004, 0.002, 0.001), None, algorithms=("gauss-seidel", "in-process"),
-                progress=None)
-    assert 0.9 <= res["orders"]["gauss-seidel"]["q"] <= 1.15, res["table"]
-    for gs, replica in zip(*([r for r in res["rows"] if r["algorithm"] == a] for a in ("gauss-seidel", "in-process"))):
+    steps = (0.01, 0.005, 0.002, 0.001)
+    res = study(system, steps, None, algorithms=("gauss-seidel", "in-process"), progress=None)
+    assert 0.9 <= res["orders"]["gauss-seidel"]["q"] <= 1.3, res["table"]
+    rows = {a: [r for r in res["rows"] if r["algorithm"] == a] for a in ("gauss-seidel", "in-process")}
+    for row, h in zip(rows["gauss-seidel"], steps):
+        assert row["q_error"] <= 0.1 * h, res["table"]          # rad or m; C <= 0.1 per second
+    assert rows["gauss-seidel"][-1]["q_error"] < 1e-4           # within 0.1 mrad / 0.1 mm at 1 ms
+    for gs, replica in zip(rows["gauss-seidel"], rows["in-process"]):
         assert gs["q_error"] == replica["q_error"]          # the replica is the master, bit for bit
 
 

@@ -1,0 +1,44 @@
+"""Step responses of the computed-torque loop of any robot: co-simulation against linear predictions.
+
+A *step experiment* holds a joint reference ``q_ref = q0 + A`` from t = 0 and lets the robot's
+controller and plant FMUs respond from rest at ``q0`` (by default its ``home`` configuration).
+With a perfect model every joint is a double integrator closed by the PD/PID law, so the
+response of each joint, revolute (rad) or prismatic (m), is predicted by linear models:
+
+:mod:`.linear`
+    The continuous error dynamics, its ZOH discretization and the sampled-data loop the FMUs
+    implement (:func:`error_dynamics`, :func:`zoh_prediction`, :func:`discrete_prediction`,
+    :func:`predict`).
+:mod:`.metrics`
+    Rise time, settling time, overshoot and peak relative to an initial value and time
+    (:func:`step_metrics`), and the second-order closed forms (:func:`damping_from_overshoot`,
+    :func:`second_order_settling_time`).
+:mod:`.design`
+    Gains from a requested settling time and overshoot (:func:`design_gains`).
+:mod:`.experiment`
+    The two-block step diagram of any robot on the project's
+    :class:`~robofmu.system.master.Master` (:func:`step_system`, :func:`cosimulate_step`), its
+    :class:`Comparison` with the predictions (:func:`compare`), CSV and figure
+    (:func:`write_csv`, :func:`plot_comparison`); :func:`demo_cases` for the report.
+:mod:`.cli`
+    The ``robofmu step`` command (:func:`add_step_command`).
+"""
+from __future__ import annotations
+
+from .cli import add_step_command, default_robot, main
+from .design import GainDesign, design_gains
+from .experiment import (CONTROLLER, DEFAULT_STEP_HEIGHT, DRIVERS, PLANT, Comparison, StepSetup, compare,
+                         cosimulate_step, default_step_heights, demo_cases, plot_comparison, step_setup,
+                         step_system, write_csv)
+from .linear import MODEL_TEXT, MODELS, discrete_prediction, error_dynamics, predict, zoh_prediction
+from .metrics import StepMetrics, damping_from_overshoot, second_order_settling_time, step_metrics
+
+__all__ = [
+    "MODELS", "MODEL_TEXT", "error_dynamics", "zoh_prediction", "discrete_prediction", "predict",
+    "StepMetrics", "step_metrics", "damping_from_overshoot", "second_order_settling_time",
+    "GainDesign", "design_gains",
+    "CONTROLLER", "PLANT", "DRIVERS", "DEFAULT_STEP_HEIGHT", "StepSetup", "Comparison",
+    "default_step_heights", "step_setup", "step_system", "cosimulate_step", "compare", "write_csv",
+    "plot_comparison", "demo_cases",
+    "add_step_command", "default_robot", "main",
+]

@@ -1,0 +1,626 @@
+"""The co-simulated step experiment of any robot, and its comparison with the linear predictions.
+
+The experiment is a two-block diagram built here, whatever the robot: the robot's
+``controller`` FMU (computed torque) and its ``plant`` FMU (the manipulator dynamics), with
+``plant.q -> controller.q``, ``plant.qd -> controller.qd`` and ``controller.tau -> plant.tau``.
+The controller's reference inputs stay unconnected: ``q_ref`` starts at ``q0 + A`` (the step,
+from t = 0), ``qd_ref`` and ``qdd_ref`` at 0, a gripper input (where the robot has one) open.
+The plant starts at rest at ``q0``, by default the robot's ``home`` configuration. The master
+(:class:`~robofmu.system.master.Master`, Gauss-Seidel by default) runs it; :func:`compare` sets
+the recorded positions against :func:`~.linear.predict` for every model, joint by joint.
+
+Units come from the robot model: a revolute joint's position is in rad and its effort in N.m,
+a prismatic joint's in m and N. Step heights are in each joint's own unit.
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from robofmu.components.robots import load_description, load_model
+
+from ..diagram import BlockSpec, System
+from ..master import Master, Result
+from .linear import MODEL_TEXT, MODELS, check_gains, check_step, predict
+from .metrics import StepMetrics, step_metrics
+
+__all__ = ["CONTROLLER", "PLANT", "DRIVERS", "DEFAULT_STEP_HEIGHT", "StepSetup", "Comparison",
+           "default_step_heights", "step_setup", "step_system", "cosimulate_step", "compare",
+           "write_csv", "plot_comparison", "demo_cases"]
+
+#: Instance names of the two blocks of the step diagram (they prefix the recorded columns).
+CONTROLLER = "controller"
+PLANT = "plant"
+
+#: Co-simulation drivers: name -> the master's algorithm.
+DRIVERS = {"master": "gauss-seidel", "jacobi": "jacobi"}
+
+#: Default step height by joint unit: 0.02 rad (about 1.15 degrees) for a revolute joint, 0.02 m
+#: for a prismatic one. No robot description or seed document gives another value. The
+#: predictions are linear in the height and hold the inertia and gravity of the start pose, so
+#: a small step keeps the configuration-dependent terms small, while the response stays many
+#: orders above the plant's integration error.
+DEFAULT_STEP_HEIGHT = {"rad": 0.02, "m": 0.02}
+
+
+def default_step_heights(robot: str) -> np.ndarray:
+    """The default step height of every joint of ``robot`` (:data:`DEFAULT_STEP_HEIGHT`).
+
+    Parameters
+    ----------
+    robot : str
+        A described robot (``robofmu.components.robots.available()``).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        In each joint's unit (rad or m).
+    """
+    return np.array([DEFAULT_STEP_HEIGHT[unit] for unit in load_model(robot).joint_units(0)])
+
+
+@dataclass(frozen=True)
+class StepSetup:
+    """A step experiment resolved against a robot: who steps, from where, by how much.
+
+    Attributes
+    ----------
+    robot : str
+    joints : list of int
+        Stepped joints, numbered from 1 like the FMU variables.
+    q0 : numpy.ndarray, shape (n,)
+        Start configuration (joint units), at rest.
+    heights : numpy.ndarray, shape (n,)
+        Step height of every joint (joint units); those of unstepped joints are the scale their
+        crosstalk is measured in.
+    q_ref : numpy.ndarray, shape (n,)
+        The held reference: ``q0`` plus ``heights`` on the stepped joints.
+    joint_units, effort_units, symbols : list of str, length n
+        From the robot model: "rad" / "m", "N.m" / "N", "q1", "q2", ...
+    """
+
+    robot: str
+    joints: list
+    q0: np.ndarray
+    heights: np.ndarray
+    q_ref: np.ndarray
+    joint_units: list
+    effort_units: list
+    symbols: list
+
+
+def step_setup(robot: str, step: float | Sequence[float] | None = None,
+               joint: int | Sequence[int] | None = None,
+               q0: Sequence[float] | None = None) -> StepSetup:
+    """Resolve the stepped joints, start configuration and heights of a step of ``robot``.
+
+    Parameters
+    ----------
+    robot : str
+        A described robot with a controller and a plant block.
+    step : float, sequence of float or None
+        Step height (joint units). None: :data:`DEFAULT_STEP_HEIGHT` per joint. A float: that
+        height on every stepped joint, in each joint's unit. A sequence: one height per joint of
+        the robot (shape (n,)) or one per stepped joint (shape (len(joints),)).
+    joint : int, sequence of int or None
+        Stepped joint(s), from 1; None: every joint.
+    q0 : sequence of float, shape (n,), optional
+        Start configuration (joint units); default the description's ``home``.
+
+    Returns
+    -------
+    StepSetup
+
+    Raises
+    ------
+    ValueError
+        Unknown robot, no controller or plant block, a joint out of range or repeated, a
+        ``q0`` or ``step`` of the wrong length, a non-finite value or a zero height; the
+        message starts with the argument's name.
+    """
+    description = load_description(robot)
+    missing = [block for block in (CONTROLLER, PLANT) if block not in description.blocks]
+    if missing:
+        raise ValueError(f"robot: {robot!r} has no {' and no '.join(missing)} block "
+                         f"(its blocks: {', '.join(description.blocks)})")
+    model = load_model(description)
+    n = model.n
+    if joint is None:
+        joints = list(range(1, n + 1))
+    else:
+        joints = [joint] if isinstance(joint, (int, np.integer)) else list(joint)
+        for j in joints:
+            if isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 1 <= j <= n:
+                raise ValueError(f"joint: {j!r} is not a joint of {robot!r}; its joints are 1 .. {n}")
+        if len(set(joints)) != len(joints) or not joints:
+            raise ValueError(f"joint: each joint at most once, at least one, got {joints}")
+        joints = [int(j) for j in joints]
+    start = model.configuration("home") if q0 is None else np.asarray(q0, dtype=float).reshape(-1)
+    if start.size != n:
+        raise ValueError(f"q0: {robot!r} has {n} joints, got {start.size} values")
+    if not np.all(np.isfinite(start)):
+        raise ValueError(f"q0: must be finite, got {start.tolist()}")
+    heights = np.array([DEFAULT_STEP_HEIGHT[unit] for unit in model.joint_units(0)])
+    if step is not None:
+        values = np.atleast_1d(np.asarray(step, dtype=float)).reshape(-1)
+        if values.size == 1:
+            heights[:] = values[0]
+        elif values.size == n:
+            heights = values.copy()
+        elif values.size == len(joints):
+            heights[np.array(joints) - 1] = values
+        else:
+            counts = f"{n} (one per joint)" + (f" or {len(joints)} (one per stepped joint)"
+                                                 if len(joints) != n else "")
+            raise ValueError(f"step: give one height or {counts}, got {values.size}")
+    stepped = np.array(joints) - 1
+    if not np.all(np.isfinite(heights)) or np.any(heights[stepped] == 0.0):
+        raise ValueError(f"step: heights must be finite and not 0, got {heights[stepped].tolist()}")
+    q_ref = start.copy()
+    q_ref[stepped] += heights[stepped]
+    return StepSetup(robot, joints, start, heights, q_ref, model.joint_units(0), model.effort_units(),
+                     model.joint_symbols())
+
+
+def _step_text(joints: Sequence[int], heights: Sequence[float], symbols: Sequence[str],
+               units: Sequence[str]) -> str:
+    """``q1 +0.02 rad, q3 +0.02 m``: stepped joints (from 1) with their heights (one per stepped
+    joint) and units (``symbols`` and ``units``: one per joint of the robot)."""
+    return ", ".join(f"{symbols[j - 1]} {a:+g} {units[j - 1]}" for j, a in zip(joints, heights))
+
+
+def step_system(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
+                step: float | Sequence[float] | None = None, h: float = 1e-3, t_end: float = 1.0,
+                joint: int | Sequence[int] | None = None,
+                q0: Sequence[float] | None = None) -> System:
+    """The step-experiment diagram of ``robot``: controller + plant, q and qd fed back, tau forward.
+
+    The controller's q_ref input (unconnected) starts at q0 + step on the stepped joints;
+    qd_ref, qdd_ref and a gripper input keep their start values 0 / false (the master warns
+    that they are unconnected). The controller's model is the plant's (same gravity, no
+    payload: the gripper is open).
+
+    Parameters
+    ----------
+    fmu_root : str or Path
+        Folder holding ``<robot>/controller.fmu`` and ``<robot>/plant.fmu``.
+    kp, kd, ki : float
+        Gains (1/s^2, 1/s, 1/s^3), the same on every joint.
+    robot : str
+        A described robot with a controller and a plant block.
+    step, joint, q0
+        As for :func:`step_setup` (joint units; default heights, every joint, ``home``).
+    h, t_end : float
+        Communication step and stop time (s).
+
+    Returns
+    -------
+    System
+        Named ``<robot>-step``; blocks :data:`CONTROLLER` and :data:`PLANT`.
+    """
+    kp, kd, ki = check_gains(kp, kd, ki)
+    setup = step_setup(robot, step, joint, q0)
+    return System(
+        blocks=[BlockSpec(CONTROLLER, f"{robot}/controller.fmu",
+                          {"kp": kp, "kd": kd, "ki": ki, "q_ref": setup.q_ref.tolist()}),
+                BlockSpec(PLANT, f"{robot}/plant.fmu", {"q0": setup.q0.tolist()})],
+        wires=[f"{PLANT}.q -> {CONTROLLER}.q", f"{PLANT}.qd -> {CONTROLLER}.qd",
+               f"{CONTROLLER}.tau -> {PLANT}.tau"],
+        fmu_dir=Path(fmu_root), name=f"{robot}-step", stop_time=float(t_end), step=float(h),
+        description="reference step " + _step_text(setup.joints, setup.heights[np.array(setup.joints) - 1],
+                                                   setup.symbols, setup.joint_units))
+
+
+def cosimulate_step(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
+                    step: float | Sequence[float] | None = None, h: float = 1e-3, t_end: float = 1.0,
+                    joint: int | Sequence[int] | None = None, q0: Sequence[float] | None = None,
+                    driver: str = "master") -> Result:
+    """Co-simulate a reference step of ``robot``'s computed-torque loop (controller + plant FMUs).
+
+    Parameters
+    ----------
+    fmu_root : str or Path
+        Folder holding ``<robot>/{controller,plant}.fmu`` (e.g. ``fmus``).
+    kp, kd, ki : float
+        Gains (1/s^2, 1/s, 1/s^3).
+    robot : str
+        A described robot with a controller and a plant block.
+    step : float, sequence of float or None
+        Step height(s) in joint units (see :func:`step_setup`); default
+        :data:`DEFAULT_STEP_HEIGHT` (0.02 rad or 0.02 m per joint).
+    h : float
+        Communication step (s).
+    t_end : float
+        Stop time (s), a whole number of steps.
+    joint : int, sequence of int or None
+        Stepped joint(s), from 1; None: every joint.
+    q0 : sequence of float, shape (n,), optional
+        Start configuration (joint units); default the robot's ``home``.
+    driver : {"master", "jacobi"}
+        :class:`~robofmu.system.master.Master` with Gauss-Seidel ("master") or Jacobi.
+
+    Returns
+    -------
+    Result
+        Recorded ``plant.q[j]``, ``plant.qd[j]`` (rad or m, rad/s or m/s) and
+        ``controller.tau[j]`` (N.m or N) at t_k = k h, shape (n_steps + 1,) each, with their
+        units; ``info`` adds ``robot, kp, kd, ki, h, heights (list, n), joints, q0, q_ref
+        (lists, n), joint_units, effort_units, symbols (lists, n), driver, warnings``.
+    """
+    h = check_step(h)
+    if driver not in DRIVERS:
+        raise ValueError(f"driver {driver!r}: choose one of {', '.join(DRIVERS)}")
+    setup = step_setup(robot, step, joint, q0)
+    system = step_system(fmu_root, kp, kd, ki, robot=robot, step=setup.heights, h=h, t_end=t_end,
+                         joint=setup.joints, q0=setup.q0)
+    master = Master(system, record=[f"{PLANT}.q*", f"{CONTROLLER}.tau*"])
+    diagram_warnings = master.check()
+    result = master.run(float(t_end), h, DRIVERS[driver])
+    result.info.update(robot=robot, kp=float(kp), kd=float(kd), ki=float(ki), h=h,
+                       heights=setup.heights.tolist(), joints=list(setup.joints), q0=setup.q0.tolist(),
+                       q_ref=setup.q_ref.tolist(), joint_units=list(setup.joint_units),
+                       effort_units=list(setup.effort_units), symbols=list(setup.symbols),
+                       driver=driver, warnings=diagram_warnings)
+    return result
+
+
+# -- comparison ---------------------------------------------------------------------------------
+@dataclass
+class Comparison:
+    """A co-simulated step against the linear predictions (see :func:`compare`).
+
+    With n samples, n_joints joints of which k are stepped:
+
+    Attributes
+    ----------
+    time : ndarray, shape (n,)
+        Communication points (s).
+    joints : list of int, length k
+        Stepped joints (from 1).
+    heights : ndarray, shape (k,)
+        Step height of each stepped joint (its unit).
+    response : ndarray, shape (n, k)
+        Co-simulated q - q0 of the stepped joints (their units).
+    crosstalk_joints : list of int, length n_joints - k
+        The other joints (from 1).
+    crosstalk : ndarray, shape (n, n_joints - k)
+        Co-simulated q - q0 of the other joints (their units; 0 with perfect decoupling).
+    predictions : dict of str -> ndarray, shape (n, k)
+        q - q0 predicted by each model in :data:`~.linear.MODELS`, per stepped joint (its unit).
+    deviation : dict of str -> ndarray, shape (k,)
+        max over samples of |co-simulated - predicted| in % of |height|, per stepped joint.
+    crosstalk_percent : float
+        max over the other joints of max |q - q0| in % of that joint's own step height
+        (``Result.info["heights"]``); 0 if every joint is stepped.
+    metrics : dict of str -> StepMetrics
+        ``"joint <j>"`` for each stepped joint (absolute positions, its unit, from q0 to
+        q0 + height) and one per model, of the unit step response (from 0 to 1: peak and final
+        values are fractions of the step height; times and percentages are the same as for any
+        height, the models being linear).
+    result : Result
+        The co-simulation.
+    gains : dict
+        kp, kd, ki (1/s^2, 1/s, 1/s^3).
+    h : float
+        Communication step (s).
+    driver : str
+    robot : str
+    q0 : list of float, length n_joints
+        Start configuration (joint units).
+    joint_units, effort_units, symbols : list of str, length n_joints
+        From the robot model ("rad" / "m", "N.m" / "N", "q1", ...).
+    """
+
+    time: np.ndarray
+    joints: list
+    heights: np.ndarray
+    response: np.ndarray
+    crosstalk_joints: list
+    crosstalk: np.ndarray
+    predictions: dict
+    deviation: dict
+    crosstalk_percent: float
+    metrics: dict
+    result: Result
+    gains: dict
+    h: float
+    driver: str = "master"
+    robot: str = ""
+    q0: list = field(default_factory=list)
+    joint_units: list = field(default_factory=list)
+    effort_units: list = field(default_factory=list)
+    symbols: list = field(default_factory=list)
+
+    def unit(self, joint: int) -> str:
+        """Unit of joint ``joint``'s position (from 1): "rad" or "m"."""
+        return self.joint_units[joint - 1]
+
+    def symbol(self, joint: int) -> str:
+        """Label of joint ``joint`` (from 1), e.g. "q2"."""
+        return self.symbols[joint - 1]
+
+    def effort(self) -> np.ndarray:
+        """Co-simulated actuator efforts ``controller.tau``, shape (n, n_joints) (N.m or N)."""
+        return self.result.vector(f"{CONTROLLER}.tau")
+
+    def best(self) -> str:
+        """The model with the smallest max deviation."""
+        return min(self.deviation, key=lambda model: float(np.max(self.deviation[model])))
+
+    def max_deviation(self, model: str = "sampled") -> float:
+        """max over stepped joints and samples of |co-simulated - predicted|, % of the height."""
+        return float(np.max(self.deviation[model]))
+
+    def step_text(self) -> str:
+        """``q1 +0.02 rad, q3 +0.02 m``: the stepped joints with their heights and units."""
+        return _step_text(self.joints, self.heights, self.symbols, self.joint_units)
+
+    def table(self) -> str:
+        """Metrics of every stepped joint and model, then the deviations, as aligned text."""
+        g = self.gains
+        start = ", ".join(f"{q:g} {u}" for q, u in zip(self.q0, self.joint_units))
+        lines = [f"{self.robot}: step {self.step_text()} from q0 = ({start}); kp {g['kp']:g}, "
+                 f"kd {g['kd']:g}, ki {g['ki']:g}; h {self.h * 1e3:g} ms; driver {self.driver}",
+                 f"{'response':<24}{'rise (s)':>10}{'settle (s)':>12}{'overshoot %':>13}"
+                 f"{'peak time (s)':>15}{'peak':>12}{'final':>12}  unit"]
+        for name, m in self.metrics.items():
+            unit = self.unit(int(name.split()[1])) if name.startswith("joint ") else "step height"
+            lines.append(f"{name:<24}{m.rise_time:>10.4f}{m.settling_time:>12.4f}{m.overshoot:>13.3f}"
+                         f"{m.peak_time:>15.4f}{m.peak:>12.5f}{m.steady_state:>12.5f}  {unit}")
+        lines.append("max |co-simulated - predicted| over all samples, % of the step height:")
+        for model in self.deviation:
+            per_joint = ", ".join(f"{self.symbol(j)} {d:.3f}"
+                                  for j, d in zip(self.joints, self.deviation[model]))
+            lines.append(f"  {model:<11} {self.max_deviation(model):8.3f} %   ({per_joint})  "
+                         f"{MODEL_TEXT[model]}")
+        if self.crosstalk.size:
+            lines.append(f"  unstepped joints moved by at most {self.crosstalk_percent:.3f} % of their "
+                         "step height")
+        lines.append(f"best match: {self.best()}")
+        return "\n".join(lines)
+
+
+def _units_of(result: Result, n: int) -> tuple[list, list, list]:
+    """Joint units, effort units and symbols of a step result: its ``info``, else its columns'."""
+    info = result.info
+    joint_units = info.get("joint_units") or [result.units.get(f"{PLANT}.q[{j}]", "")
+                                              for j in range(1, n + 1)]
+    effort_units = info.get("effort_units") or [result.units.get(f"{CONTROLLER}.tau[{j}]", "")
+                                                for j in range(1, n + 1)]
+    symbols = info.get("symbols") or [f"q{j}" for j in range(1, n + 1)]
+    return list(joint_units), list(effort_units), list(symbols)
+
+
+def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.02,
+            interpolate: bool = True) -> Comparison:
+    """Compare a co-simulated step (from :func:`cosimulate_step`) with the linear predictions.
+
+    Parameters
+    ----------
+    result : Result
+        From :func:`cosimulate_step` (its ``info`` carries gains, h, heights, joints, q0, units).
+    models : sequence of str
+        Predictions to compute, from :data:`~.linear.MODELS`.
+    settling : float
+        Settling band for the metrics (0.02: 2 %).
+    interpolate : bool
+        Passed to :func:`~.metrics.step_metrics`.
+
+    Returns
+    -------
+    Comparison
+        Deviations (max over samples of |co-simulated - predicted|, % of each joint's height)
+        and the metrics of both (steady state taken as the reference q0 + height, which a
+        perfect model reaches; the record may end before the PID's slow integral mode has).
+    """
+    info = result.info
+    kp, kd, ki, h = info["kp"], info["kd"], info["ki"], info["h"]
+    joints, q0 = list(info["joints"]), np.asarray(info["q0"], dtype=float)
+    all_heights = np.asarray(info["heights"], dtype=float)
+    t = result.time
+    y = result.vector(f"{PLANT}.q") - q0
+    stepped = np.array(joints) - 1
+    others = [j for j in range(1, q0.size + 1) if j not in joints]
+    heights = all_heights[stepped]
+    response = y[:, stepped]
+    crosstalk = y[:, np.array(others, dtype=int) - 1] if others else np.zeros((len(t), 0))
+    unit_responses, predictions, deviation = {}, {}, {}
+    for model in models:
+        unit_responses[model] = predict(kp, kd, ki, t - t[0], 1.0, model, h)
+        predictions[model] = unit_responses[model][:, None] * heights[None, :]
+        deviation[model] = np.max(np.abs(response - predictions[model]), axis=0) / np.abs(heights) * 100.0
+    metrics: dict[str, StepMetrics] = {}
+    for j, height, column in zip(joints, heights, response.T):
+        start = q0[j - 1]
+        metrics[f"joint {j}"] = step_metrics(t, column + start, y0=start, yf=start + height,
+                                             settling=settling, interpolate=interpolate)
+    for model, unit_response in unit_responses.items():
+        metrics[model] = step_metrics(t, unit_response, y0=0.0, yf=1.0, settling=settling,
+                                      interpolate=interpolate)
+    crosstalk_percent = 0.0
+    if others:
+        scale = np.abs(all_heights[np.array(others) - 1])
+        crosstalk_percent = float(np.max(np.max(np.abs(crosstalk), axis=0) / scale) * 100.0)
+    joint_units, effort_units, symbols = _units_of(result, q0.size)
+    return Comparison(time=t, joints=joints, heights=heights, response=response,
+                      crosstalk_joints=others, crosstalk=crosstalk, predictions=predictions,
+                      deviation=deviation, crosstalk_percent=crosstalk_percent, metrics=metrics,
+                      result=result, gains={"kp": kp, "kd": kd, "ki": ki}, h=h,
+                      driver=info.get("driver", "master"), robot=info.get("robot", ""),
+                      q0=q0.tolist(), joint_units=joint_units, effort_units=effort_units,
+                      symbols=symbols)
+
+
+# -- output -------------------------------------------------------------------------------------
+def write_csv(comparison: Comparison, path: str | Path) -> Path:
+    """Write the comparison as CSV, units in the header.
+
+    Columns: ``time [s]``; ``cosim_<q> [<unit>]`` (co-simulated q - q0) of each stepped joint;
+    ``pred_<model>_<q> [<unit>]`` (predicted q - q0) for each model and stepped joint;
+    ``tau<j> [<unit>]`` (co-simulated effort, N.m or N) of every joint. Full precision
+    (``repr``). Parent folders are created.
+
+    Parameters
+    ----------
+    comparison : Comparison
+    path : str or Path
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    c = comparison
+    effort = c.effort()
+    header = (["time [s]"] + [f"cosim_{c.symbol(j)} [{c.unit(j)}]" for j in c.joints]
+              + [f"pred_{model}_{c.symbol(j)} [{c.unit(j)}]" for model in c.predictions for j in c.joints]
+              + [f"tau{j} [{unit}]" for j, unit in enumerate(c.effort_units, start=1)])
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        for k, tk in enumerate(c.time):
+            predicted = (v for model in c.predictions for v in c.predictions[model][k])
+            row = [float(tk), *c.response[k], *predicted, *effort[k]]
+            writer.writerow([repr(float(v)) for v in row])
+    return path
+
+
+def _display(unit: str) -> str:
+    """A unit for a figure: products with a middle dot (N.m -> N·m)."""
+    return unit.replace(".", "\u00b7")
+
+
+def _groups(joints: Sequence[int], units: Sequence[str]) -> dict[str, list[int]]:
+    """Joints (from 1) grouped by unit, in order of first appearance."""
+    groups: dict[str, list[int]] = {}
+    for j in joints:
+        groups.setdefault(units[j - 1], []).append(j)
+    return groups
+
+
+def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | None = None) -> Path:
+    """Figure of the co-simulated step against the continuous, c2d and sampled-data predictions.
+
+    One panel of q - q0 per position unit of the stepped joints (rad, m) with the co-simulated
+    responses and the predictions; then co-simulated minus predicted, in % of each joint's step
+    height, with the 1 % band; then one panel of the actuator efforts per effort unit (N.m, N).
+    Labels and units come from the robot model.
+
+    Parameters
+    ----------
+    comparison : Comparison
+    out_dir : str or Path
+        Folder for the PNG (created).
+    name : str, optional
+        File stem; default from robot, gains, step and stepped joints.
+
+    Returns
+    -------
+    Path
+        The PNG written.
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    c = comparison
+    g = c.gains
+    if name is None:
+        name = (f"step_{c.robot}_kp{g['kp']:g}_kd{g['kd']:g}_ki{g['ki']:g}_h{c.h * 1e3:g}ms_"
+                f"j{'-'.join(map(str, c.joints))}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    position_groups = _groups(c.joints, c.joint_units)
+    effort_groups = _groups(range(1, len(c.effort_units) + 1), c.effort_units)
+    ratios = [3] * len(position_groups) + [2] + [2] * len(effort_groups)
+    fig, axes = plt.subplots(len(ratios), 1, figsize=(8, 1.6 * sum(ratios) / 2 + 1.5), sharex=True,
+                             gridspec_kw={"height_ratios": ratios}, squeeze=False)
+    axes = axes[:, 0]
+    styles = {"continuous": dict(color="k", lw=1.2, ls="-"),
+              "zoh": dict(color="tab:orange", lw=0, marker=".", ms=3),
+              "sampled": dict(color="tab:blue", lw=1.2, ls="--")}
+    column = {j: k for k, j in enumerate(c.joints)}
+    for ax, (unit, joints) in zip(axes, position_groups.items()):
+        for j in joints:
+            ax.plot(c.time, c.response[:, column[j]], lw=2.5, alpha=0.45,
+                    label=f"co-simulated {c.symbol(j)} ({c.heights[column[j]]:+g} {_display(unit)})")
+        for model in c.predictions:
+            drawn = set()
+            for j in joints:
+                height = float(c.heights[column[j]])
+                if height in drawn:
+                    continue
+                ax.plot(c.time, c.predictions[model][:, column[j]], **styles.get(model, {}),
+                        label=MODEL_TEXT[model] if not drawn else None)
+                drawn.add(height)
+        for height in {float(c.heights[column[j]]) for j in joints}:
+            ax.axhline(height, color="grey", lw=0.6)
+        ax.set_ylabel(f"q - q0 ({_display(unit)})")
+        ax.legend(fontsize=8)
+    deviation_axis = axes[len(position_groups)]
+    for model in c.predictions:
+        for k, j in enumerate(c.joints):
+            percent = (c.response[:, k] - c.predictions[model][:, k]) / abs(c.heights[k]) * 100.0
+            deviation_axis.plot(c.time, percent, color=styles.get(model, {}).get("color"),
+                                lw=0.9 if model != "continuous" else 0.7,
+                                ls=":" if model == "continuous" else "-", alpha=0.85,
+                                label=f"vs {model} (max {c.max_deviation(model):.2f} %)" if k == 0 else None)
+    for sign in (-1.0, 1.0):
+        deviation_axis.axhline(sign, color="grey", ls=":", lw=0.8)
+    deviation_axis.plot([], [], color="grey", ls=":", label="1 % of the step")
+    deviation_axis.set_ylabel("co-sim - prediction\n(% of step)")
+    deviation_axis.legend(fontsize=7, ncol=2)
+    effort = c.effort()
+    for ax, (unit, joints) in zip(axes[len(position_groups) + 1:], effort_groups.items()):
+        for j in joints:
+            ax.plot(c.time, effort[:, j - 1], lw=1.0, label=f"tau{j} ({c.symbol(j)})")
+        ax.set_ylabel(f"effort ({_display(unit)})")
+        ax.legend(fontsize=7, ncol=min(4, len(joints)))
+    axes[0].set_title(f"{c.robot}: step {c.step_text()}\nkp {g['kp']:.4g}, kd {g['kd']:.4g}, "
+                      f"ki {g['ki']:.4g}; h = {c.h * 1e3:g} ms ({c.driver})", fontsize=10)
+    axes[-1].set_xlabel("t (s)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = out / f"{name}.png"
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def demo_cases(robot: str, fmu_root: str | Path, out_dir: str | Path, h: float = 1e-3,
+               t_end: float = 1.0) -> list[tuple[str, tuple[Comparison, Path]]]:
+    """The default step of ``robot`` under each gain set of its description, compared and plotted.
+
+    Every joint steps by its :data:`DEFAULT_STEP_HEIGHT` from the ``home`` configuration.
+
+    Parameters
+    ----------
+    robot : str
+        A described robot with a controller and a plant block.
+    fmu_root : str or Path
+        Folder holding ``<robot>/{controller,plant}.fmu``.
+    out_dir : str or Path
+        Folder for the figures, ``step_<robot>_<gain set>.png`` (created).
+    h, t_end : float
+        Communication step and stop time (s).
+
+    Returns
+    -------
+    list of (str, (Comparison, Path))
+        One per gain set, in the description's order: the label ``"<set>: kp .., kd .., ki .."``
+        and the comparison with its figure.
+    """
+    cases = []
+    for name, gains in load_description(robot).gains.items():
+        comparison = compare(cosimulate_step(fmu_root, gains.kp, gains.kd, gains.ki, robot=robot, h=h,
+                                             t_end=t_end))
+        figure = plot_comparison(comparison, out_dir, name=f"step_{robot}_{name}")
+        cases.append((f"{name}: kp {gains.kp:g}, kd {gains.kd:g}, ki {gains.ki:g}", (comparison, figure)))
+    return cases

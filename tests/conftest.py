@@ -1,31 +1,52 @@
-"""Shared fixtures: the chess FMUs, built fresh from this checkout once per test session."""
+"""Shared fixtures: every robot's FMUs, built fresh from this checkout once per test session.
+
+- ``fmu_root``: the collection, ``<root>/<robot>/<block>.fmu`` for every described robot
+  (:func:`robofmu.components.robots.available`), built once per session;
+- ``fmu_dir``: ``<root>/chess`` (the chess tests name blocks relative to it);
+- ``robot``: a parametrized fixture, one test per described robot (ids: the robot's name);
+  :func:`fmu_util.robot_blocks` gives ``(robot, block)`` parameters with ids like ``rrp-plant``.
+"""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
-from robofmu.components.robot import Robot, load_spec
+from robofmu.components.robots import available, load_description, load_model
 
 
 @pytest.fixture(scope="session")
-def fmu_dir(tmp_path_factory):
-    """Folder holding chess/{trajectory,ik,controller,plant}.fmu built from the current sources."""
+def fmu_root(tmp_path_factory):
+    """Root of the FMU collection built from the current sources: ``<root>/<robot>/<block>.fmu``."""
     from robofmu.system.build import build
 
     out = tmp_path_factory.mktemp("fmus")
-    build("chess", out, log=lambda *_: None)
-    return out / "chess"
+    for robot in available():
+        build(robot, out, log=lambda *_: None)
+    return out
 
 
 @pytest.fixture(scope="session")
-def chess_spec():
-    return load_spec("chess")
+def fmu_dir(fmu_root):
+    """Folder holding chess/{trajectory,ik,controller,plant}.fmu."""
+    return fmu_root / "chess"
+
+
+@pytest.fixture(params=available())
+def robot(request) -> str:
+    """Each described robot in turn (by name)."""
+    return request.param
+
+
+@pytest.fixture(scope="session")
+def chess_description():
+    return load_description("chess")
 
 
 @pytest.fixture
 def chess():
-    return Robot("chess")
+    """A fresh model of the chess arm (its own payload and gravity state)."""
+    return load_model("chess")
 
 
 @pytest.fixture(scope="session")

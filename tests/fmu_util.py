@@ -1,56 +1,134 @@
-"""Helpers for tests that drive the chess FMUs through fmpy (via robofmu.system.fmu.Block)."""
+"""Helpers for tests that drive the FMUs through fmpy (via robofmu.system.fmu.Block).
+
+- :func:`open_block`: one instantiated, initialized FMU;
+- :func:`robot_blocks`: ``(robot, block)`` test parameters over the whole collection;
+- :class:`Loop`: an experiment's diagram stepped by hand, for tests that need the blocks between
+  two steps (FMU state). Its topology is the experiment's (``robofmu.system.check.plan``: the
+  wires and the evaluation order), nothing is wired here; a test that only needs a loop run
+  drives :class:`robofmu.system.master.Master` instead.
+"""
 from __future__ import annotations
 
+from pathlib import Path
+
+import pytest
+
+from robofmu.components.robots import available, load_description
+from robofmu.system import experiment
+from robofmu.system.check import plan
 from robofmu.system.fmu import Block
 
 
 def open_block(fmu_dir, block, name=None, parameters=None, start_time=0.0):
     """Instantiate and initialize ``fmu_dir/<block>.fmu``."""
-    b = Block(fmu_dir / f"{block}.fmu", name or block)
+    b = Block(Path(fmu_dir) / f"{block}.fmu", name or block)
     b.initialize(start_time, parameters)
     return b
 
 
-class ChessLoop:
-    """trajectory -> ik -> controller -> plant, fed back; outputs in dependency order
-    (Gauss-Seidel at each communication point, no step of delay), then every block steps."""
+def robot_blocks(kinds=None, robots=None) -> list:
+    """``pytest.param(robot, block, id="robot-block")`` for every block of every described robot
+    (optionally only blocks of ``kinds`` / robots in ``robots``), in description order."""
+    params = []
+    for robot in available() if robots is None else robots:
+        for block in load_description(robot).blocks:
+            if kinds is None or block in kinds:
+                params.append(pytest.param(robot, block, id=f"{robot}-{block}"))
+    return params
 
-    def __init__(self, fmu_dir, controller=None, plant=None):
-        self.tr = open_block(fmu_dir, "trajectory")
-        self.ik = open_block(fmu_dir, "ik")
-        self.ct = open_block(fmu_dir, "controller", parameters=controller)
-        self.pl = open_block(fmu_dir, "plant", parameters=plant)
-        self.blocks = [self.tr, self.ik, self.ct, self.pl]
-        self.v_tr_out = self.tr.vrs("x_ref", "xd_ref", "xdd_ref")
-        self.v_ik_in = self.ik.vrs("x_ref", "xd_ref", "xdd_ref")
-        self.v_ik_out = self.ik.vrs("q_ref", "qd_ref", "qdd_ref")
-        self.v_ct_in = self.ct.vrs("q_ref", "qd_ref", "qdd_ref", "q", "qd")
-        self.v_ct_out = self.ct.vrs("tau")
-        self.v_pl_out = self.pl.vrs("q", "qd")
-        self.v_pl_in = self.pl.vrs("tau")
+
+class Loop:
+    """The diagram of an experiment, exchanged and stepped by hand like the master does.
+
+    At each communication point the blocks are evaluated in the plan's order (Gauss-Seidel): a
+    block gets the inputs produced by blocks evaluated before it, then its outputs are read;
+    inputs from blocks evaluated later are set after the pass. Then every block steps.
+
+    Parameters
+    ----------
+    name : str
+        Experiment name (``system/experiments/<name>.toml``).
+    fmu_root : Path
+        Root of the FMU collection.
+    parameters : dict, optional
+        ``{instance: {parameter: value}}`` over the experiment's own.
+    """
+
+    def __init__(self, name: str, fmu_root, parameters: dict | None = None):
+        system = experiment.load(name, fmu_dir=fmu_root)
+        for instance, values in (parameters or {}).items():
+            system.block(instance).parameters.update(values)
+        self.plan = plan(system)
+        self.order = list(self.plan.order)
+        self.blocks: dict[str, Block] = {}
+        try:
+            for instance in self.order:
+                node = self.plan.nodes[instance]
+                b = Block(node.path, instance)
+                self.blocks[instance] = b
+                b.initialize(0.0, node.spec.parameters)
+        except Exception:
+            self.close()
+            raise
+        rank = {instance: k for k, instance in enumerate(self.order)}
+        self._outputs = {}
+        for instance in self.order:
+            variables = self.plan.nodes[instance].variables
+            reals = [v.name for v in variables.values() if v.causality == "output" and v.type == "Real"]
+            booleans = [v.name for v in variables.values() if v.causality == "output" and v.type == "Boolean"]
+            self._outputs[instance] = (reals, [variables[n].valueReference for n in reals],
+                                       booleans, [variables[n].valueReference for n in booleans])
+        links = self.plan.links
+        self._early = {i: [l for l in links if l.target == i and rank[l.source] < rank[i]] for i in self.order}
+        self._late = {i: [l for l in links if l.target == i and rank[l.source] >= rank[i]] for i in self.order}
         self.t = 0.0
 
-    def exchange(self):
-        """Evaluate the diagram at the current point; returns (x_ref, q_ref.., q/qd, tau)."""
-        x = self.tr.get_real(self.v_tr_out)
-        grip = self.tr.get("grip")
-        self.ik.set_real(self.v_ik_in, x)
-        qref = self.ik.get_real(self.v_ik_out)
-        y = self.pl.get_real(self.v_pl_out)
-        self.ct.set_real(self.v_ct_in, qref + y)
-        self.ct.set("grip", grip)
-        tau = self.ct.get_real(self.v_ct_out)
-        self.pl.set_real(self.v_pl_in, tau)
-        self.pl.set("grip", grip)
-        return x, qref, y, tau
+    def __getitem__(self, instance: str) -> Block:
+        return self.blocks[instance]
 
-    def step(self, h):
+    def _set(self, instance: str, links, signals: dict) -> None:
+        block = self.blocks[instance]
+        variables = self.plan.nodes[instance].variables
+        reals = [l for l in links if variables[l.input].type == "Real"]
+        if reals:
+            block.set_real([variables[l.input].valueReference for l in reals],
+                           [signals[f"{l.source}.{l.output}"] for l in reals])
+        for l in links:
+            if variables[l.input].type != "Real":
+                block.set(l.input, signals[f"{l.source}.{l.output}"])
+
+    def exchange(self) -> dict:
+        """Evaluate the diagram at the current point; every output by ``instance.variable``."""
+        signals = {}
+        for instance in self.order:
+            self._set(instance, self._early[instance], signals)
+            reals, real_vrs, booleans, boolean_vrs = self._outputs[instance]
+            block = self.blocks[instance]
+            if reals:
+                signals.update(zip((f"{instance}.{n}" for n in reals), block.get_real(real_vrs)))
+            if booleans:
+                values = block.slave.getBoolean(boolean_vrs)
+                signals.update(zip((f"{instance}.{n}" for n in booleans), (bool(v) for v in values)))
+        for instance in self.order:
+            self._set(instance, self._late[instance], signals)
+        return signals
+
+    def step(self, h: float) -> dict:
+        """Exchange at t, then doStep(t, h) on every block; returns the outputs at t."""
         out = self.exchange()
-        for b in self.blocks:
-            b.do_step(self.t, h)
+        for instance in self.order:
+            self.blocks[instance].do_step(self.t, h)
         self.t += h
         return out
 
-    def close(self):
-        for b in self.blocks:
+    def get_states(self) -> dict:
+        return {instance: b.get_state() for instance, b in self.blocks.items()}
+
+    def set_states(self, states: dict, t: float) -> None:
+        for instance, state in states.items():
+            self.blocks[instance].set_state(state)
+        self.t = t
+
+    def close(self) -> None:
+        for b in self.blocks.values():
             b.close()

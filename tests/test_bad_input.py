@@ -22,7 +22,7 @@ def _failed_init(fmu_dir, block, parameters):
     ("plant", {"g": float("nan")}, "parameter g = nan"),
     ("plant", {"max_substep": 0.0}, "parameter max_substep = 0 s is invalid: must be > 0"),
     ("plant", {"q0[2]": float("inf")}, "parameter q0[2] = inf is invalid"),
-    ("controller", {"kp": -400.0}, "parameter kp = -400 is invalid: must be >= 0"),
+    ("controller", {"kp": -400.0}, "parameter kp = -400.0 1/s2 is invalid: must be >= 0"),
     ("controller", {"kd": float("nan")}, "parameter kd = nan"),
     ("controller", {"ki": -1.0}, "parameter ki = -1"),
     ("trajectory", {"waypoints": "0.21 0 0; 0.21 0 zero"}, "waypoints: malformed number"),
@@ -30,10 +30,11 @@ def _failed_init(fmu_dir, block, parameters):
     ("trajectory", {"durations": "1 3 0 1 2 1 1"}, "durations: every move must take a positive"),
     ("trajectory", {"durations": "1 3 1 -1 2 1 1"}, "durations: every move must take a positive"),
     ("trajectory", {"durations": "1 3 1"}, "durations: need one duration per move (7), got 3"),
-    ("trajectory", {"cruise_factor": 3.0}, "cruise_factor: must lie in (1, 2]"),
-    ("trajectory", {"pause": -0.5}, "pause: must be >= 0 s"),
+    ("trajectory", {"cruise_factor": 3.0}, "parameter cruise_factor = 3.0 is invalid"),
+    ("trajectory", {"cruise_factor": 1.0}, "cruise_factor: must lie in (1, 2]"),
+    ("trajectory", {"pause": -0.5}, "parameter pause = -0.5 s is invalid: must be >= 0"),
     ("trajectory", {"grip_close_after_move": 9}, "grip_close_after_move: must be 0 (never) or a move number 1..7"),
-    ("ik", {"elbow": "sideways"}, "elbow: unknown option 'sideways'"),
+    ("ik", {"elbow": "sideways"}, "parameter elbow = 'sideways' is invalid: must be one of 'up', 'down'"),
 ])
 def test_invalid_parameter_fails_initialization_naming_it(fmu_dir, block, parameters, names):
     text, messages = _failed_init(fmu_dir, block, parameters)
@@ -103,10 +104,11 @@ def test_exception_inside_a_step_is_logged_with_its_text():
     """Any Python exception in a step reaches the importer as a logged error with its text."""
     from pythonfmu.enums import Fmi2Status
 
-    from robofmu.components.fmi.controller import ControllerSlave
+    from robofmu.components.fmi.base import BlockSlave
 
-    class Slave(ControllerSlave):
+    class Slave(BlockSlave):
         robot_name = "chess"
+        block_kind = "controller"
 
     s = Slave(instance_name="c")
     s.exit_initialization_mode()
@@ -114,7 +116,7 @@ def test_exception_inside_a_step_is_logged_with_its_text():
     def broken(*_):
         raise ZeroDivisionError("the integrator met a zero")
 
-    s.law.advance = broken
+    s.logic.law.advance = broken
     assert s.do_step(0.0, 0.01) is False
     (msg,) = s.log_queue
     assert msg.status == Fmi2Status.error

@@ -5,10 +5,10 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from robofmu.components.control import ComputedTorque
-from robofmu.components.robot import Robot
+from robofmu.components.robots import RobotModel, load_model
 
 
-def closed_loop(plant: Robot, law: ComputedTorque, q_ref, q0, t_end):
+def closed_loop(plant: RobotModel, law: ComputedTorque, q_ref, q0, t_end):
     """Continuous closed loop (plant + controller with integral state) at tight tolerance."""
     n = plant.n
     zeros = np.zeros(n)
@@ -30,8 +30,8 @@ def error_dynamics(kp, kd, ki):
 
 @pytest.mark.parametrize("gains", [dict(kp=400.0, kd=20.0, ki=0.0), dict(kp=600.0, kd=25.0, ki=75.0)])
 def test_perfect_model_gives_linear_error_dynamics(gains):
-    plant = Robot("chess")
-    law = ComputedTorque(Robot("chess"), **gains)
+    plant = load_model("chess")
+    law = ComputedTorque(load_model("chess"), **gains)
     q_ref = np.array([0.4, 0.9, -1.6, -0.9])
     q0 = q_ref - np.array([0.05, -0.08, 0.1, 0.02])
     sol = closed_loop(plant, law, q_ref, q0, 1.0)
@@ -48,7 +48,7 @@ def test_pd_closed_form_underdamped():
     # kp = 400, kd = 20: wn = 20 rad/s, zeta = 0.5
     wn, zeta = 20.0, 0.5
     wd = wn * np.sqrt(1 - zeta**2)
-    plant, law = Robot("chess"), ComputedTorque(Robot("chess"), 400.0, 20.0)
+    plant, law = load_model("chess"), ComputedTorque(load_model("chess"), 400.0, 20.0)
     q_ref = np.array([0.0, 0.8, -1.5, -0.87])
     e0 = 0.1
     sol = closed_loop(plant, law, q_ref, q_ref - e0, 0.6)
@@ -59,13 +59,13 @@ def test_pd_closed_form_underdamped():
 
 def test_unknown_payload_pd_keeps_a_static_error_pid_removes_it():
     """The pawn unknown to the model: PD settles at e = M^-1 (m g J_z) / kp, PID at 0."""
-    plant = Robot("chess")
+    plant = load_model("chess")
     plant.set_payload(0.03)
     q_ref = np.array([0.3, 0.8, -1.5, -0.87])
-    pd = ComputedTorque(Robot("chess"), 400.0, 20.0)
+    pd = ComputedTorque(load_model("chess"), 400.0, 20.0)
     sol = closed_loop(plant, pd, q_ref, q_ref, 4.0)
     e_pd = q_ref - sol.y[:4, -1]
-    model = Robot("chess")
+    model = load_model("chess")
     # at rest at q = q_ref - e: M_model(q) kp e + g_model(q) = g_true(q); fixed-point iteration
     expected = np.zeros(4)
     for _ in range(20):
@@ -73,7 +73,7 @@ def test_unknown_payload_pd_keeps_a_static_error_pid_removes_it():
         expected = np.linalg.solve(model.mass_matrix(q), plant.gravity_torque(q) - model.gravity_torque(q)) / 400.0
     np.testing.assert_allclose(e_pd, expected, rtol=1e-6, atol=1e-12)
     assert np.max(np.abs(e_pd)) > 1e-4
-    pid = ComputedTorque(Robot("chess"), 600.0, 25.0, 75.0)
+    pid = ComputedTorque(load_model("chess"), 600.0, 25.0, 75.0)
     sol = closed_loop(plant, pid, q_ref, q_ref, 40.0)
     # the slowest closed-loop pole is near -ki/kp = -0.125 1/s: the error decays like exp(-t/8)
     e20 = np.max(np.abs(q_ref - sol.sol(20.0)[:4]))
@@ -83,7 +83,7 @@ def test_unknown_payload_pd_keeps_a_static_error_pid_removes_it():
 
 
 def test_integral_advances_with_the_held_error():
-    law = ComputedTorque(Robot("chess"), 1.0, 1.0, 2.0)
+    law = ComputedTorque(load_model("chess"), 1.0, 1.0, 2.0)
     law.advance(np.array([1.0, 0, 0, 0]), np.array([0.5, 0, 0, 0.25]), 0.01)
     np.testing.assert_allclose(law.z, [0.005, 0, 0, -0.0025])
 
@@ -92,4 +92,4 @@ def test_integral_advances_with_the_held_error():
                                           ("ki", dict(kp=1.0, kd=1.0, ki=-0.1))])
 def test_invalid_gain_names_it(name, kwargs):
     with pytest.raises(ValueError, match=f"{name}: gain must be finite and >= 0"):
-        ComputedTorque(Robot("chess"), **kwargs)
+        ComputedTorque(load_model("chess"), **kwargs)

@@ -2,8 +2,9 @@
 
 The reference model below is written from the arm's specification (standard DH table, link
 masses, centres of mass and inertia tensors) and never reads the URDF. Every test compares a
-number computed by ``Robot`` (Pinocchio on the URDF) or by ``Plant`` with a number computed by
-this reference, or by a solver that does not share code with the project (scipy, sympy).
+number computed by the robot model (``load_model("chess")``: Pinocchio on the URDF) or by
+``Plant`` with a number computed by this reference, or by a solver that does not share code
+with the project (scipy, sympy).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from robofmu.components.plant import Plant
-from robofmu.components.robot import Robot
+from robofmu.components.robots import RobotModel, load_model
 
 # =============================================================================================
 # Independent reference model of the chess arm (from the specification, not from the URDF)
@@ -165,8 +166,8 @@ QD_SAMPLES = RNG.uniform(-2.0, 2.0, size=(20, N))
 
 
 @pytest.fixture
-def robot() -> Robot:
-    return Robot("chess")
+def robot() -> RobotModel:
+    return load_model("chess")
 
 
 def _rel(a, b) -> float:
@@ -355,7 +356,7 @@ def test_payload_adds_point_mass_at_tcp(robot):
 
 
 def test_plant_grip_carries_payload():
-    robot = Robot("chess")
+    robot = load_model("chess")
     q = Q_SAMPLES[0]
     plant = Plant(robot, q, np.zeros(N), payload_mass=0.03)
     e_open = plant.energy()
@@ -371,7 +372,7 @@ def test_plant_grip_carries_payload():
 
 @pytest.mark.parametrize("gravity", [0.0, G0])
 def test_plant_conserves_energy(gravity):
-    robot = Robot("chess")
+    robot = load_model("chess")
     robot.set_gravity(gravity)
     q0 = np.array([0.3, 0.4, -0.6, 0.2])
     qd0 = np.array([1.0, -0.8, 1.2, 0.5])
@@ -405,7 +406,7 @@ CONVERGENCE_STARTS = {
 @pytest.mark.parametrize("start", list(CONVERGENCE_STARTS))
 def test_plant_rk4_fourth_order_convergence(start):
     q0, gentle = CONVERGENCE_STARTS[start]
-    robot = Robot("chess")
+    robot = load_model("chess")
     qd0 = np.array([0.4, -0.3, 0.6, -0.2])
     tau = robot.gravity_torque(q0) + np.array([0.05, 0.1, -0.05, 0.01])
     t_end, h = 1.0, 0.02  # 50 communication steps; every max_substep below divides h

@@ -1,10 +1,11 @@
 """Closed-form chess IK: FK(IK(x)) = x along the task, rates against finite differences."""
 import math
+import re
 
 import numpy as np
 import pytest
 
-from robofmu.components.ik import ChessIK, Unreachable
+from robofmu.components.ik import Unreachable, make_solver, solver_class
 from robofmu.components.trajectory import WaypointTrajectory
 
 A1, A2, A3, A4 = 0.1905, 0.3048, 0.3048, 0.09525
@@ -31,13 +32,14 @@ def ik_reference(x, sign_q2=+1.0):
 
 @pytest.fixture
 def ik(chess):
-    return ChessIK(chess)
+    """The chess arm's solver as its description names it (pitch_elbow, tool down, elbow up)."""
+    return make_solver(chess)
 
 
 @pytest.fixture
-def gambit(chess_spec):
-    s = chess_spec.scenario
-    return WaypointTrajectory(s["waypoints"], s["durations"], s["pause"], s["cruise_factor"])
+def gambit(chess_description):
+    assert "profile" not in chess_description.trajectory.parameters
+    return WaypointTrajectory(**chess_description.trajectory.parameters)
 
 
 def test_link_lengths_come_from_the_model(ik):
@@ -62,9 +64,15 @@ def test_seed_sign_of_q2_misses_by_up_to_019_m(gambit):
     assert 0.1 < worst < 0.25
 
 
+def test_solver_is_the_one_the_description_names(ik, chess_description):
+    assert ik.kind == chess_description.ik.kind == "pitch_elbow"
+    assert type(ik) is solver_class("pitch_elbow")
+    assert ik.values == {"tool_pitch": -math.pi / 2, "elbow": "up"}
+
+
 def test_elbow_down_branch_also_reaches(chess):
-    down = ChessIK(chess, elbow="down")
-    up = ChessIK(chess)
+    down = make_solver(chess, elbow="down")
+    up = make_solver(chess)
     x = np.array([0.25, 0.1, 0.12])
     np.testing.assert_allclose(fk_closed_form(down.position(x)), x, atol=1e-12)
     assert down.position(x)[2] > 0 > up.position(x)[2]       # elbow bends the other way
@@ -117,5 +125,17 @@ def test_unreachable_targets_raise(ik, x, message):
 
 
 def test_unknown_elbow_option(chess):
-    with pytest.raises(ValueError, match="elbow: unknown option 'sideways'"):
-        ChessIK(chess, elbow="sideways")
+    message = "IK solver 'pitch_elbow': parameter elbow = 'sideways' is invalid: must be one of 'up', 'down'"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        make_solver(chess, elbow="sideways")
+    with pytest.raises(ValueError, match=re.escape(message)):
+        solver_class("pitch_elbow")(chess, tool_pitch=-math.pi / 2, elbow="sideways")
+
+
+def test_tool_pitch_is_a_parameter(chess):
+    """Another tool pitch: q2 + q3 + q4 holds it and FK still reaches the target."""
+    ik = solver_class("pitch_elbow")(chess, tool_pitch=-1.2, elbow="up")
+    x = np.array([0.25, 0.1, 0.12])
+    q = ik.position(x)
+    assert q[1] + q[2] + q[3] == pytest.approx(-1.2, abs=1e-12)
+    np.testing.assert_allclose(fk_closed_form(q), x, atol=1e-12)

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from robofmu.components.trajectory import (WaypointTrajectory, format_matrix, lspb,
-                                           parse_matrix, parse_vector)
+from robofmu.components.blocks.text import format_matrix, format_vector, parse_matrix, parse_vector
+from robofmu.components.trajectory import WaypointTrajectory, lspb
 
 
 def test_lspb_closed_form_default_cruise():
@@ -38,17 +38,26 @@ def test_lspb_is_continuous_and_consistent(cruise):
 
 
 @pytest.fixture
-def gambit(chess_spec):
-    s = chess_spec.scenario
+def gambit(chess_description):
+    s = chess_description.trajectory.parameters
     return WaypointTrajectory(s["waypoints"], s["durations"], s["pause"], s["cruise_factor"],
                               s["grip_close_after_move"], s["grip_open_after_move"])
 
 
-def test_scenario_timeline(gambit, chess_spec):
+def test_description_holds_the_scenario(chess_description):
+    assert chess_description.trajectory.kind == "waypoints"
+    assert sorted(chess_description.trajectory.parameters) == [
+        "cruise_factor", "durations", "grip_close_after_move", "grip_open_after_move", "pause", "waypoints"]
+    s = chess_description.trajectory.parameters
+    assert (s["pause"], s["cruise_factor"]) == (0.5, 1.5)
+    assert (s["grip_close_after_move"], s["grip_open_after_move"]) == (3, 6)
+
+
+def test_scenario_timeline(gambit, chess_description):
     assert gambit.duration == pytest.approx(13.0)
     ends = np.cumsum([1, 3, 1, 1, 2, 1, 1]) + 0.5 * np.arange(7)
     np.testing.assert_allclose(gambit.move_ends, ends)
-    waypoints = np.array(chess_spec.scenario["waypoints"])
+    waypoints = np.array(chess_description.trajectory.parameters["waypoints"])
     for k, t_end in enumerate(ends):
         x, xd, xdd = gambit.evaluate(t_end)
         np.testing.assert_allclose(x, waypoints[k + 1], atol=1e-15)
@@ -116,6 +125,8 @@ def test_parse_round_trip_and_errors():
     rows = [[0.21, 0.0, 0.0], [-0.03, 0.18, 0.15]]
     np.testing.assert_array_equal(parse_matrix(format_matrix(rows), "w", columns=3), rows)
     np.testing.assert_array_equal(parse_vector("1, 3 1", "d"), [1, 3, 1])
+    durations = [1.0, 0.1, 1 / 3]
+    np.testing.assert_array_equal(parse_vector(format_vector(durations), "d"), durations)   # exact
     with pytest.raises(ValueError, match="waypoints: malformed"):
         parse_matrix("0 0 zero; 1 1 1", "waypoints")
     with pytest.raises(ValueError, match="waypoints: rows must"):

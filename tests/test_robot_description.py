@@ -1,0 +1,352 @@
+"""Robot descriptions (``components/robots/<name>/<name>.toml``): the loader refuses every malformed
+file naming the file and the key; every described robot loads; home configurations and units.
+
+Broken descriptions are copies of the real ones (URDF included) edited in ``tmp_path``: read with
+tomllib, one key changed, written back by :func:`dump_toml`. A copy left unedited reads back the
+same description, so each refusal below is caused by its edit alone.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+import shutil
+import tomllib
+
+import numpy as np
+import pytest
+
+from robofmu.components.blocks import make_block
+from robofmu.components.robots import (ROBOTS_DIR, DescriptionError, RobotModel, available,
+                                       load_description, load_model)
+from robofmu.components.robots.description import read
+
+
+# -- writing TOML ----------------------------------------------------------------------------------
+def _key(k: str) -> str:
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
+
+
+def _value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def dump_toml(data: dict, prefix: str = "") -> str:
+    """``data`` as TOML: scalars and arrays first, then one ``[table]`` per sub-table."""
+    lines = [f"{_key(k)} = {_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
+    for k, v in data.items():
+        if isinstance(v, dict):
+            name = f"{prefix}{_key(k)}"
+            lines += ["", f"[{name}]", dump_toml(v, name + ".")]
+    return "\n".join(lines) + "\n"
+
+
+def _parent(data: dict, dotted: str):
+    *path, last = dotted.split(".")
+    for k in path:
+        data = data[k]
+    return data, last
+
+
+def set_key(data: dict, dotted: str, value) -> None:
+    parent, last = _parent(data, dotted)
+    parent[last] = value
+
+
+def del_key(data: dict, dotted: str) -> None:
+    parent, last = _parent(data, dotted)
+    del parent[last]
+
+
+@pytest.fixture
+def copy_robot(tmp_path):
+    """``copy_robot(robot, edit=None, stem=None)``: the robot's folder copied to tmp_path, its TOML
+    rewritten after ``edit(data)`` as ``<stem>.toml`` (default the robot's name); returns the path."""
+    def make(robot: str, edit=None, stem: str | None = None):
+        folder = tmp_path / robot
+        if not folder.exists():
+            shutil.copytree(ROBOTS_DIR / robot, folder, ignore=shutil.ignore_patterns("*.toml", "__pycache__"))
+        data = tomllib.loads((ROBOTS_DIR / robot / f"{robot}.toml").read_text())
+        if edit is not None:
+            edit(data)
+        path = folder / f"{stem or robot}.toml"
+        path.write_text(dump_toml(data))
+        return path
+    return make
+
+
+def refusal(path, key: str) -> str:
+    """The DescriptionError of reading ``path``, checked to name the file and ``key``."""
+    with pytest.raises(DescriptionError) as info:
+        read(path)
+    exc = info.value
+    assert exc.key == key, str(exc)
+    assert exc.path == path
+    text = str(exc)
+    assert text.startswith(f"{path}: {key}: "), text
+    return text
+
+
+# -- a faithful copy -------------------------------------------------------------------------------
+def test_an_unedited_copy_reads_back_the_same_description(robot, copy_robot):
+    path = copy_robot(robot)
+    copy, real = read(path), load_description(robot)
+    assert copy.path == path and copy.urdf == path.parent / real.urdf.name
+    for field in ("name", "summary", "blocks", "task", "configurations", "gravity", "gravity_direction",
+                  "payload", "gains", "trajectory", "ik"):
+        assert getattr(copy, field) == getattr(real, field), field
+    assert load_model(copy).n == load_model(real).n
+
+
+# -- refusals --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("robot, key", [
+    ("rrp", "name"), ("chess", "name"), ("rrp", "urdf"), ("rrp", "summary"), ("rrp", "blocks"),
+    ("rrp", "task"), ("rrp", "task.frame"), ("chess", "task.frame"), ("rrp", "task.coordinates"),
+    ("rrp", "configurations"), ("rrp", "configurations.home"), ("rpp", "configurations.home"),
+    ("rrp", "gains"), ("rrp", "gains.pd.kp"), ("rrp", "gains.pd.kd"), ("chess", "payload.mass"),
+    ("rrp", "trajectory"), ("rrp", "trajectory.profile"), ("rpp", "trajectory.profile"),
+    ("rrp", "ik.solver"),
+])
+def test_missing_key_is_refused_naming_file_and_key(copy_robot, robot, key):
+    path = copy_robot(robot, lambda d: del_key(d, key))
+    assert refusal(path, key).endswith(f"{key}: missing")
+
+
+def test_gain_set_table_without_any_set_is_refused(copy_robot):
+    path = copy_robot("rrp", lambda d: set_key(d, "gains", {}))
+    assert "needs at least one gain set" in refusal(path, "gains")
+
+
+@pytest.mark.parametrize("robot, key, value, problem", [
+    ("rrp", "name", 3, "must be a non-empty string, got 3"),
+    ("rrp", "name", "", "must be a non-empty string"),
+    ("rrp", "summary", ["spherical"], "must be a non-empty string"),
+    ("rrp", "urdf", 1.5, "must be a non-empty string"),
+    ("rrp", "blocks", "plant", "must be a non-empty list of strings, got 'plant'"),
+    ("rrp", "blocks", [], "must be a non-empty list of strings"),
+    ("rrp", "blocks", ["plant", "teleporter"], "unknown block 'teleporter'"),
+    ("rrp", "task", "tcp", "must be a table, got 'tcp'"),
+    ("rrp", "task.frame", 0, "must be a non-empty string"),
+    ("rrp", "task.coordinates", ["x", 1, "z"], "must be a non-empty list of strings"),
+    ("rrp", "task.axes", [0, 1, 5], "must be distinct world axes among 0, 1, 2"),
+    ("rrp", "task.axes", [0, 0, 1], "must be distinct world axes among 0, 1, 2"),
+    ("rrp", "task.axes", [0, 1], "must have 3 values, got 2"),
+    ("rrp", "configurations.home", "zero", "must be a list of finite numbers, got 'zero'"),
+    ("rrp", "configurations.home", [0.0, "a", 0.1], "must be a list of finite numbers"),
+    ("rrp", "configurations.home", [0.0, float("nan"), 0.1], "must be a list of finite numbers"),
+    ("rrp", "configurations.home", [0.0, True, 0.1], "must be a list of finite numbers"),
+    ("rrp", "gravity", 9.81, "must be a table, got 9.81"),
+    ("rrp", "gravity.magnitude", "9.81", "must be a finite number, got '9.81'"),
+    ("rrp", "gravity.magnitude", True, "must be a finite number, got True"),
+    ("rrp", "gravity.magnitude", float("inf"), "must be a finite number"),
+    ("rrp", "gravity.magnitude", -9.81, "must be >= 0, got -9.81"),
+    ("chess", "payload.mass", -0.03, "must be >= 0, got -0.03"),
+    ("chess", "payload.frame", ["tcp"], "must be a non-empty string"),
+    ("rrp", "gains.pd", 400.0, "must be a table, got 400.0"),
+    ("rrp", "gains.pd.kp", "400", "must be a finite number, got '400'"),
+    ("rrp", "gains.pd.kd", -40.0, "must be >= 0, got -40.0"),
+    ("chess", "gains.pid.ki", [75.0], "must be a finite number"),
+    ("rrp", "trajectory", "line", "must be a table, got 'line'"),
+    ("rrp", "trajectory.profile", 1, "must be a non-empty string, got 1"),
+    ("rrp", "ik", "spherical", "must be a table, got 'spherical'"),
+    ("chess", "ik.solver", "", "must be a non-empty string"),
+])
+def test_wrong_type_is_refused_naming_file_and_key(copy_robot, robot, key, value, problem):
+    path = copy_robot(robot, lambda d: set_key(d, key, value))
+    assert problem in refusal(path, key)
+
+
+@pytest.mark.parametrize("robot, key", [
+    ("rrp", "colour"), ("rrp", "task.rotation"), ("rrp", "gravity.dir"), ("rrp", "gains.pd.kx"),
+    ("chess", "payload.volume"), ("chess", "gains.pid.kii"),
+])
+def test_unknown_key_is_refused_naming_file_and_key(copy_robot, robot, key):
+    path = copy_robot(robot, lambda d: set_key(d, key, 1.0))
+    assert "unknown key (known: " in refusal(path, key)
+
+
+def test_unknown_profile_and_solver_parameters_are_refused_naming_file_and_key(copy_robot):
+    """[trajectory] and [ik] hold the parameters of a registered profile or solver: the block
+    (and the solver) that reads them refuses an unknown one, naming the file and the key."""
+    path = copy_robot("rrp", lambda d: set_key(d, "trajectory.lenght", 0.03125))
+    with pytest.raises(ValueError, match=re.escape(f"{path}: [trajectory]: unknown parameter 'lenght'")):
+        make_block(read(path), "trajectory")
+    path = copy_robot("chess", lambda d: set_key(d, "ik.wrist", "left"))
+    with pytest.raises(ValueError, match=re.escape(f"{path}: [ik]: unknown parameter 'wrist'")):
+        make_block(read(path), "ik")
+    path = copy_robot("chess", lambda d: set_key(d, "ik.elbow", "sideways"))
+    with pytest.raises(ValueError, match=re.escape(f"{path}: [ik]: parameter elbow = 'sideways' is invalid")):
+        make_block(read(path), "ik")
+
+
+def test_unknown_profile_and_solver_are_refused_by_the_blocks(copy_robot):
+    path = copy_robot("rrp", lambda d: set_key(d, "trajectory.profile", "spline"))
+    with pytest.raises(ValueError, match="no block 'trajectory' variant 'spline'; known: .*trajectory:line"):
+        make_block(read(path), "trajectory")
+    path = copy_robot("rrp", lambda d: set_key(d, "ik.solver", "newton"))
+    with pytest.raises(ValueError, match="unknown IK solver 'newton'; known: .*spherical"):
+        make_block(read(path), "ik")
+
+
+def test_name_must_be_the_files_name(copy_robot):
+    path = copy_robot("rrp", stem="other")
+    assert "must be the file's name 'other', got 'rrp'" in refusal(path, "name")
+
+
+def test_urdf_must_exist(copy_robot):
+    path = copy_robot("rrp", lambda d: set_key(d, "urdf", "nope.urdf"))
+    assert f"no such file {path.parent / 'nope.urdf'}" in refusal(path, "urdf")
+
+
+@pytest.mark.parametrize("direction, problem", [
+    ([0.0, 0.0, -2.0], "must be a unit vector, got length 2"),
+    ([0.0, 0.0, 0.0], "must be a unit vector, got length 0"),
+    ([0.0, 0.6, -0.7], "must be a unit vector"),
+    ([0.0, -1.0], "must have 3 values, got 2"),
+    ([0.0, "down", 0.0], "must be a list of finite numbers"),
+])
+def test_bad_gravity_direction_is_refused(copy_robot, direction, problem):
+    path = copy_robot("rrp", lambda d: set_key(d, "gravity.direction", direction))
+    assert problem in refusal(path, "gravity.direction")
+
+
+def test_other_unit_gravity_directions_are_accepted(copy_robot):
+    path = copy_robot("rrp", lambda d: set_key(d, "gravity.direction", [0.0, 0.6, -0.8]))
+    assert read(path).gravity_direction == (0.0, 0.6, -0.8)
+    model = load_model(read(path))
+    np.testing.assert_allclose(np.asarray(model.model.gravity.linear), [0.0, 0.6 * 9.81, -0.8 * 9.81],
+                               atol=1e-15)
+
+
+def test_home_of_the_wrong_length_for_the_urdf_is_refused(copy_robot):
+    path = copy_robot("rrp", lambda d: set_key(d, "configurations.home", [0.0, 0.0]))
+    description = read(path)                   # the TOML alone cannot know the URDF's joints
+    with pytest.raises(ValueError) as info:
+        load_model(description)
+    text = str(info.value)
+    assert text.startswith(f"{path}: configurations.home: ")
+    assert "needs 3 joint values (the URDF has 3 joints), got 2" in text
+
+
+def test_configurations_of_different_lengths_are_refused(copy_robot):
+    path = copy_robot("rrp", lambda d: set_key(d, "configurations.park", [0.0, 0.0]))
+    assert "every configuration needs the same number of joints, got [2, 3]" in refusal(
+        path, "configurations.home")
+
+
+@pytest.mark.parametrize("key", ["task.frame", "payload.frame"])
+def test_frames_must_exist_in_the_urdf(copy_robot, key):
+    path = copy_robot("chess", lambda d: set_key(d, key, "gripper_tip"))
+    with pytest.raises(ValueError, match=re.escape(f"{path}: {key}: no frame 'gripper_tip' in chess.urdf")):
+        load_model(read(path))
+
+
+def test_ik_block_needs_an_ik_table_and_the_other_way_round(copy_robot):
+    path = copy_robot("rrp", lambda d: del_key(d, "ik"))
+    assert "an [ik] table is needed exactly when `blocks` lists 'ik'" in refusal(path, "ik")
+    path = copy_robot("rpp", lambda d: set_key(d, "ik", {"solver": "spherical"}))
+    assert "an [ik] table is needed exactly when `blocks` lists 'ik'" in refusal(path, "ik")
+
+
+def test_missing_file_and_bad_syntax_are_named(tmp_path):
+    path = tmp_path / "ghost.toml"
+    assert "does not exist" in refusal(path, "(file)")
+    path.write_text('name = "ghost"\n[task\n')
+    refusal(path, "(syntax)")
+
+
+# -- the described robots --------------------------------------------------------------------------
+def test_the_robots_are_described():
+    assert available() == ["chess", "rpp", "rrp"]
+
+
+def test_every_described_robot_loads(robot):
+    description = load_description(robot)
+    assert description.name == robot and description.path == ROBOTS_DIR / robot / f"{robot}.toml"
+    model = load_model(robot)
+    assert isinstance(model, RobotModel) and model.description is description
+    assert model.n == len(description.configuration("home")) == len(model.joint_names)
+    assert model.m == len(description.task.coordinates) == 3
+    assert load_model(robot) is not model                   # a new instance each call
+    assert {"trajectory", "controller", "plant"} <= set(description.blocks)
+    assert ("ik" in description.blocks) == (description.ik is not None)
+    for kind in description.blocks:
+        block = make_block(robot, kind)
+        block.configure()
+        block.output(0.0)
+        assert np.all(np.isfinite(block.values)), kind
+    gains = description.gain_set("pd")
+    assert gains.as_dict() == {"kp": gains.kp, "kd": gains.kd, "ki": gains.ki}
+    with pytest.raises(ValueError, match="has no gains 'pdq'"):
+        description.gain_set("pdq")
+    with pytest.raises(ValueError, match="has no configuration 'park'"):
+        description.configuration("park")
+
+
+def test_chess_home_is_the_first_waypoint_at_rest():
+    model = load_model("chess")
+    first = load_description("chess").trajectory.parameters["waypoints"][0]
+    np.testing.assert_allclose(model.fk(model.configuration("home")), first, rtol=0, atol=1e-12)
+    q = model.configuration("home")
+    assert q[1] + q[2] + q[3] == pytest.approx(-math.pi / 2, abs=1e-12)     # tool pointing down
+
+
+def test_rrp_home_puts_the_tcp_at_the_line_start():
+    model = load_model("rrp")
+    np.testing.assert_allclose(model.fk(model.configuration("home")), [0.125, 0.0, 0.125], rtol=0,
+                               atol=1e-15)
+    np.testing.assert_allclose(load_description("rrp").trajectory.parameters["start"], [0.125, 0.0, 0.125])
+
+
+def test_rpp_home_is_the_bang_bang_start():
+    description = load_description("rpp")
+    assert description.configuration("home") == (0.0, 1.0, 1.0)
+    assert tuple(description.trajectory.parameters["q_start"]) == (0.0, 1.0, 1.0)
+    np.testing.assert_allclose(load_model("rpp").fk(np.array([0.0, 1.0, 1.0])), [0.0, 1.0, 1.0], atol=1e-15)
+
+
+def test_gravity_and_payload():
+    for robot in available():
+        d = load_description(robot)
+        assert (d.gravity, d.gravity_direction) == (9.81, (0.0, 0.0, -1.0))
+    chess = load_description("chess")
+    assert (chess.payload.mass, chess.payload.frame) == (0.03, "tcp")
+    assert load_description("rrp").payload is None and load_description("rpp").payload is None
+    with pytest.raises(ValueError, match="describes no payload frame"):
+        load_model("rrp").set_payload(0.1)
+
+
+@pytest.mark.parametrize("robot, prismatic", [
+    ("chess", [False, False, False, False]), ("rrp", [False, False, True]), ("rpp", [False, True, True]),
+])
+def test_prismatic_joints_have_si_units(robot, prismatic):
+    model = load_model(robot)
+    assert model.prismatic == prismatic
+    for order, suffix in enumerate(("", "/s", "/s2")):
+        assert model.joint_units(order) == [("m" if p else "rad") + suffix for p in prismatic]
+        assert model.task_units(order) == ["m" + suffix] * 3
+    assert model.effort_units() == ["N" if p else "N.m" for p in prismatic]
+    # and the blocks declare them
+    plant = make_block(robot, "plant")
+    units = {v.name: v.unit for v in plant.variables}
+    for j, p in enumerate(prismatic, start=1):
+        assert (units[f"tau[{j}]"], units[f"q[{j}]"], units[f"qd[{j}]"]) == (
+            ("N", "m", "m/s") if p else ("N.m", "rad", "rad/s"))
+    controller = {v.name: v.unit for v in make_block(robot, "controller").variables}
+    for j, p in enumerate(prismatic, start=1):
+        assert controller[f"qdd_ref[{j}]"] == ("m/s2" if p else "rad/s2")
+        assert controller[f"tau[{j}]"] == ("N" if p else "N.m")

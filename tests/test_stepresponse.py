@@ -231,7 +231,8 @@ def test_every_robot_step_matches_sampled_data_prediction(fmu_root, robot_name, 
     np.testing.assert_allclose(c.q0, model.configuration("home"))
     for j, unit in zip(c.joints, model.joint_units(0)):
         assert c.unit(j) == unit and result.units[f"plant.q[{j}]"] == unit
-        assert c.heights[j - 1] == experiment.DEFAULT_STEP_HEIGHT[unit]
+        assert abs(c.heights[j - 1]) == experiment.DEFAULT_STEP_HEIGHT[unit]
+    np.testing.assert_array_equal(c.heights, experiment.default_step_heights(robot_name))   # within limits
     assert c.effort_units == model.effort_units()
     # the response is a step, not a flat line: it has arrived by the end
     np.testing.assert_allclose(c.response[-1], c.heights, rtol=0.02)
@@ -267,7 +268,7 @@ def test_comparison_csv_and_figure_carry_the_model_units(fmu_root, tmp_path):
     c = experiment.compare(result)
     assert c.joints == [2, 3] and c.crosstalk_joints == [1] and c.crosstalk.shape == (61, 1)
     assert c.predictions["sampled"].shape == (61, 2) and c.deviation["sampled"].shape == (2,)
-    assert "q2 +0.02 rad, q3 +0.02 m" in c.table()
+    assert "q2 +0.02 rad, q3 -0.02 m" in c.table()
     path = experiment.write_csv(c, tmp_path / "compare.csv")
     header = path.read_text().splitlines()[0].split(",")
     assert header[:3] == ["time [s]", "cosim_q2 [rad]", "cosim_q3 [m]"]

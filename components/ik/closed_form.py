@@ -89,8 +89,8 @@ class SphericalIK(IKSolver):
             raise ValueError(f"IK solver {self.kind!r} needs joints revolute, revolute, prismatic "
                              "and 3 task coordinates")
         self.d1 = float(robot.fk(np.zeros(3))[2])           # the shoulder: the TCP at s3 = 0
-        limits = robot.model.lowerPositionLimit[2], robot.model.upperPositionLimit[2]
-        self.extension = (max(0.0, float(limits[0])), float(limits[1]))
+        lower, upper = robot.position_limits()
+        self.extension = (max(0.0, float(lower[2])), float(upper[2]))
 
     def position(self, x):
         px, py, pz = float(x[0]), float(x[1]), float(x[2]) - self.d1

@@ -67,6 +67,10 @@ class RobotModel(ABC):
         """A named joint configuration of the description (``home``, ...), shape (n,)."""
         return np.array(self.description.configuration(name), dtype=float)
 
+    @abstractmethod
+    def position_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper joint position limits (rad, m), each shape (n,) (+/- inf where none)."""
+
     # -- parameters ---------------------------------------------------------------------------
     @abstractmethod
     def set_gravity(self, magnitude: float) -> None:

@@ -62,6 +62,10 @@ class SerialRobot(RobotModel):
     def task_units(self, order: int = 0) -> list[str]:
         return [derivative_unit("m", order)] * self.m
 
+    def position_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """The URDF's joint limits (Pinocchio's lower/upperPositionLimit)."""
+        return self.model.lowerPositionLimit.copy(), self.model.upperPositionLimit.copy()
+
     # -- parameters -------------------------------------------------------------------------
     def set_gravity(self, magnitude: float) -> None:
         self.gravity = float(magnitude)

@@ -48,7 +48,9 @@ DEFAULT_STEP_HEIGHT = {"rad": 0.02, "m": 0.02}
 
 
 def default_step_heights(robot: str) -> np.ndarray:
-    """The default step height of every joint of ``robot`` (:data:`DEFAULT_STEP_HEIGHT`).
+    """The default step height of every joint of ``robot`` (:data:`DEFAULT_STEP_HEIGHT`), signed
+    so that the step from ``home`` stays within the joint's limits (downward where home + height
+    would pass the upper limit, as the rrp slide's home at its full extension).
 
     Parameters
     ----------
@@ -60,7 +62,15 @@ def default_step_heights(robot: str) -> np.ndarray:
     numpy.ndarray, shape (n,)
         In each joint's unit (rad or m).
     """
-    return np.array([DEFAULT_STEP_HEIGHT[unit] for unit in load_model(robot).joint_units(0)])
+    model = load_model(robot)
+    return _signed_heights(model, model.configuration("home"))
+
+
+def _signed_heights(model, start: np.ndarray) -> np.ndarray:
+    """:data:`DEFAULT_STEP_HEIGHT` per joint, negative where ``start`` + height passes the upper limit."""
+    heights = np.array([DEFAULT_STEP_HEIGHT[unit] for unit in model.joint_units(0)])
+    _, upper = model.position_limits()
+    return np.where(start + heights > upper, -heights, heights)
 
 
 @dataclass(frozen=True)
@@ -103,7 +113,8 @@ def step_setup(robot: str, step: float | Sequence[float] | None = None,
     robot : str
         A described robot with a controller and a plant block.
     step : float, sequence of float or None
-        Step height (joint units). None: :data:`DEFAULT_STEP_HEIGHT` per joint. A float: that
+        Step height (joint units). None: :data:`DEFAULT_STEP_HEIGHT` per joint, downward where
+        it would pass the joint's upper limit. A float: that
         height on every stepped joint, in each joint's unit. A sequence: one height per joint of
         the robot (shape (n,)) or one per stepped joint (shape (len(joints),)).
     joint : int, sequence of int or None
@@ -144,7 +155,7 @@ def step_setup(robot: str, step: float | Sequence[float] | None = None,
         raise ValueError(f"q0: {robot!r} has {n} joints, got {start.size} values")
     if not np.all(np.isfinite(start)):
         raise ValueError(f"q0: must be finite, got {start.tolist()}")
-    heights = np.array([DEFAULT_STEP_HEIGHT[unit] for unit in model.joint_units(0)])
+    heights = _signed_heights(model, start)
     if step is not None:
         values = np.atleast_1d(np.asarray(step, dtype=float)).reshape(-1)
         if values.size == 1:

@@ -25,6 +25,8 @@ class Parameter:
         Used when the robot description does not set it (None: the description must).
     low, high : float, optional
         Inclusive bounds of a Real or Integer.
+    above : float, optional
+        Exclusive lower bound (the value must be greater).
     choices : tuple of str, optional
         Allowed values of a String.
     """
@@ -37,10 +39,11 @@ class Parameter:
     low: float | None = None
     high: float | None = None
     choices: tuple[str, ...] | None = None
+    above: float | None = None
 
     def validate(self, value) -> Any:
         """``value`` checked (and converted to the parameter's Python type); ValueError naming it."""
-        shown = f"{value!r}{' ' + self.unit if self.unit not in ('', '1') else ''}"
+        unit = f" {self.unit}" if self.unit not in ("", "1") else ""
         if self.kind == "String":
             if not isinstance(value, str) or (self.choices and value not in self.choices):
                 allowed = f"one of {', '.join(map(repr, self.choices))}" if self.choices else "a string"
@@ -51,36 +54,50 @@ class Parameter:
         except (TypeError, ValueError):
             raise ValueError(f"parameter {self.name} = {value!r} is invalid: must be a number") from None
         rules = []
+        if self.above is not None:
+            rules.append(f"> {self.above:g}")
         if self.low is not None:
             rules.append(f">= {self.low:g}")
         if self.high is not None:
             rules.append(f"<= {self.high:g}")
-        ok = math.isfinite(number) and (self.low is None or number >= self.low) and (
-            self.high is None or number <= self.high)
+        ok = (math.isfinite(number) and (self.above is None or number > self.above)
+              and (self.low is None or number >= self.low) and (self.high is None or number <= self.high))
         if self.kind == "Integer" and ok and not number.is_integer():
             ok, rules = False, rules + ["a whole number"]
         if not ok:
-            raise ValueError(f"parameter {self.name} = {shown} is invalid: must be "
+            raise ValueError(f"parameter {self.name} = {number:g}{unit} is invalid: must be "
                              f"{' and '.join(rules) or 'finite'}")
         return int(number) if self.kind == "Integer" else number
 
 
-def resolve(declared: tuple[Parameter, ...], given: dict[str, Any], where: str) -> dict[str, Any]:
+class ParameterError(ValueError):
+    """A parameter table is wrong; ``name`` is the offending key, ``problem`` what is wrong."""
+
+    def __init__(self, name: str, problem: str):
+        super().__init__(f"{name}: {problem}")
+        self.name = name
+        self.problem = problem
+
+
+def resolve(declared: tuple[Parameter, ...], given: dict[str, Any], where: str = "") -> dict[str, Any]:
     """Values of ``declared`` from ``given`` (a description table) over their defaults.
 
-    Raises ValueError naming ``where`` for an unknown key or a missing or invalid value.
+    Raises
+    ------
+    ParameterError
+        For an unknown key or a missing or invalid value, naming the key.
     """
     names = {p.name for p in declared}
     unknown = sorted(set(given) - names)
     if unknown:
-        raise ValueError(f"{where}: unknown parameter {unknown[0]!r} (known: {', '.join(sorted(names)) or 'none'})")
+        raise ParameterError(unknown[0], f"unknown parameter (known: {', '.join(sorted(names)) or 'none'})")
     values = {}
     for p in declared:
         value = given.get(p.name, p.default)
         if value is None:
-            raise ValueError(f"{where}: parameter {p.name!r} missing")
+            raise ParameterError(p.name, "missing")
         try:
             values[p.name] = p.validate(value)
         except ValueError as exc:
-            raise ValueError(f"{where}: {exc}") from None
+            raise ParameterError(p.name, str(exc)) from None
     return values

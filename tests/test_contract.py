@@ -371,9 +371,9 @@ def _invalid_parameters():
     cases = []
     for robot in available():
         for block, parameters, message, what in [
-            ("controller", {"kp": -400.0}, "parameter kp = -400.0 1/s2 is invalid: must be >= 0", "kp"),
+            ("controller", {"kp": -400.0}, "parameter kp = -400 1/s2 is invalid: must be >= 0", "kp"),
             ("controller", {"kd": float("nan")}, "parameter kd = nan 1/s is invalid", "kd"),
-            ("plant", {"max_substep": -1e-3}, "parameter max_substep = -0.001 s is invalid",
+            ("plant", {"max_substep": -1e-3}, "parameter max_substep = -0.001 s is invalid: must be > 0",
              "max_substep-negative"),
             ("plant", {"max_substep": 0.0}, "parameter max_substep = 0 s is invalid: must be > 0",
              "max_substep-zero"),
@@ -382,16 +382,16 @@ def _invalid_parameters():
         ]:
             cases.append(pytest.param(robot, block, parameters, message, id=f"{robot}-{block}-{what}"))
     cases += [
-        pytest.param("rpp", "trajectory", {"a_max[1]": -1.0}, "a_max[1]: must be > 0, got -1.0",
+        pytest.param("rpp", "trajectory", {"a_max[1]": -1.0}, "parameter a_max[1] = -1 is invalid: must be > 0",
                      id="rpp-trajectory-a_max"),
         pytest.param("rpp", "trajectory", {"q_end[2]": float("nan")},
                      "parameter q_end[2] = nan is invalid: must be finite", id="rpp-trajectory-q_end"),
-        pytest.param("rrp", "trajectory", {"v_max": 0.0}, "parameter v_max = 0 is invalid: must be > 0",
+        pytest.param("rrp", "trajectory", {"v_max": 0.0}, "parameter v_max = 0 m/s is invalid: must be > 0",
                      id="rrp-trajectory-v_max"),
         pytest.param("rrp", "trajectory", {"a_max": -0.0375}, "parameter a_max = -0.0375 m/s2 is invalid",
                      id="rrp-trajectory-a_max"),
         pytest.param("rrp", "trajectory", {"direction": [0.0, 0.0, 0.0]},
-                     "direction: must not be the zero vector", id="rrp-trajectory-direction"),
+                     "parameter direction = (0, ..., 0) is invalid: must not be the zero vector", id="rrp-trajectory-direction"),
         pytest.param("chess", "ik", {"elbow": "sideways"},
                      "parameter elbow = 'sideways' is invalid: must be one of 'up', 'down'", id="chess-ik-elbow"),
     ]

@@ -48,12 +48,14 @@ def test_rpp_bangbang_tracks_within_1_mrad_1_mm_and_ends_at_rest(fmu_root):
     assert np.abs(result.vector("plant.qd")[-1]).max() < 1e-5
     # the reference: synchronized bang-bang, T = 2 sqrt((pi/2) / 3), every joint at T/2 halfway
     T = 2.0 * np.sqrt((np.pi / 2) / 3.0)
-    k = int(np.argmin(np.abs(result.time - T / 2)))
+    k = int(np.searchsorted(result.time, T / 2)) - 1             # the last point before the switch
     t = result.time[k]
+    assert T / 2 - 1e-3 < t < T / 2
     a = 4.0 * np.array([np.pi / 2, 1.0, 1.0]) / T ** 2
     np.testing.assert_allclose(result.vector("trajectory.q_ref")[k], [0, 1, 1] + 0.5 * a * t ** 2, atol=1e-12)
-    # the peak efforts are the inverse dynamics along the reference (perfect model)
+    # the peak efforts are the inverse dynamics along the reference (perfect model), plus the
+    # feedback on the tracking error the held effort leaves just after the switch (1 % on q2)
     model = load_model("rpp")
     qdd_ref, qd_ref, q_ref = (result.vector(f"trajectory.{b}") for b in ("qdd_ref", "qd_ref", "q_ref"))
     ideal = np.array([model.inverse_dynamics(*v) for v in zip(q_ref, qd_ref, qdd_ref)])
-    np.testing.assert_allclose(m.peak_effort, np.abs(ideal).max(axis=0), rtol=2e-3)
+    np.testing.assert_allclose(m.peak_effort, np.abs(ideal).max(axis=0), rtol=0.015)

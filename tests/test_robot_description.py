@@ -183,22 +183,27 @@ def test_unknown_profile_and_solver_parameters_are_refused_naming_file_and_key(c
     """[trajectory] and [ik] hold the parameters of a registered profile or solver: the block
     (and the solver) that reads them refuses an unknown one, naming the file and the key."""
     path = copy_robot("rrp", lambda d: set_key(d, "trajectory.lenght", 0.03125))
-    with pytest.raises(ValueError, match=re.escape(f"{path}: [trajectory]: unknown parameter 'lenght'")):
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: trajectory.lenght: unknown parameter (known: a_max, length, v_max)")):
+        make_block(read(path), "trajectory")
+    path = copy_robot("rpp", lambda d: set_key(d, "trajectory.q_end", [1.0, 2.0]))
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: trajectory.q_end: needs 3 values")):
         make_block(read(path), "trajectory")
     path = copy_robot("chess", lambda d: set_key(d, "ik.wrist", "left"))
-    with pytest.raises(ValueError, match=re.escape(f"{path}: [ik]: unknown parameter 'wrist'")):
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: ik.wrist: unknown parameter")):
         make_block(read(path), "ik")
     path = copy_robot("chess", lambda d: set_key(d, "ik.elbow", "sideways"))
-    with pytest.raises(ValueError, match=re.escape(f"{path}: [ik]: parameter elbow = 'sideways' is invalid")):
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: ik.elbow: parameter elbow = 'sideways' is invalid")):
         make_block(read(path), "ik")
 
 
 def test_unknown_profile_and_solver_are_refused_by_the_blocks(copy_robot):
     path = copy_robot("rrp", lambda d: set_key(d, "trajectory.profile", "spline"))
-    with pytest.raises(ValueError, match="no block 'trajectory' variant 'spline'; known: .*trajectory:line"):
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: trajectory.profile: unknown profile 'spline'; known: ")
+                       + ".*line"):
         make_block(read(path), "trajectory")
     path = copy_robot("rrp", lambda d: set_key(d, "ik.solver", "newton"))
-    with pytest.raises(ValueError, match="unknown IK solver 'newton'; known: .*spherical"):
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: ik.solver: unknown IK solver 'newton'; known: ")
+                       + ".*spherical"):
         make_block(read(path), "ik")
 
 

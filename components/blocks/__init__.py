@@ -5,7 +5,7 @@
 """
 from __future__ import annotations
 
-from ..robots import RobotDescription, load_description, load_model
+from ..robots import DescriptionError, RobotDescription, load_description, load_model
 from .base import Block, StepRefused, Variable, block_class, registered
 from . import controller, fk, ik, plant, trajectory  # noqa: F401  (register the blocks)
 
@@ -17,7 +17,14 @@ def block_type(description: RobotDescription, kind: str) -> type[Block]:
     if kind not in description.blocks:
         raise ValueError(f"robot {description.name!r} has no {kind!r} block (it has: "
                          f"{', '.join(description.blocks)})")
-    return block_class(kind, description.trajectory.kind if kind == "trajectory" else "")
+    if kind != "trajectory":
+        return block_class(kind)
+    try:
+        return block_class(kind, description.trajectory.kind)
+    except ValueError:
+        known = ", ".join(v for k, v in registered() if k == kind)
+        raise DescriptionError(description.path, "trajectory.profile",
+                               f"unknown profile {description.trajectory.kind!r}; known: {known}") from None
 
 
 def make_block(robot: str | RobotDescription, kind: str) -> Block:

@@ -31,7 +31,8 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from ..parameters import Parameter
+from ..parameters import Parameter, ParameterError, resolve
+from ..robots.description import DescriptionError
 from ..robots.model import RobotModel
 
 _REGISTRY: dict[tuple[str, str], type["Block"]] = {}
@@ -137,9 +138,11 @@ class Block:
 
     def real(self, name: str, causality: str, unit: str, description: str, start: float = 0.0,
              depends=None, initial_depends=None, low: float | None = None,
-             high: float | None = None) -> int:
-        """Declare a scalar Real; returns its slot."""
-        rule = Parameter(name, "Real", unit, description, start, low, high) if causality == "parameter" else None
+             high: float | None = None, above: float | None = None) -> int:
+        """Declare a scalar Real; returns its slot. Parameters get bounds: ``low`` and ``high``
+        inclusive, ``above`` exclusive."""
+        rule = (Parameter(name, "Real", unit, description, start, low, high, above=above)
+                if causality == "parameter" else None)
         return self._add(Variable(name, name, "Real", causality, unit, description, float(start),
                                   _tuple(depends), _tuple(initial_depends), rule))
 
@@ -227,13 +230,28 @@ class Block:
         value = self.settings[name] if name in self.settings else float(self.values[self.index[name]])
         return var.parameter.validate(value) if var.parameter is not None else value
 
-    def finite_vector(self, base: str) -> np.ndarray:
-        """A vector parameter, every element finite (ValueError naming the first bad one)."""
+    def finite_vector(self, base: str, above: float | None = None) -> np.ndarray:
+        """A vector parameter, every element finite (and > ``above`` if given); ValueError naming
+        the first bad element."""
         values = self.values[self._slots[base]]
-        bad = np.flatnonzero(~np.isfinite(values))
-        if bad.size:
-            raise ValueError(f"parameter {base}[{bad[0] + 1}] = {values[bad[0]]} is invalid: must be finite")
+        bad = ~np.isfinite(values) if above is None else ~(np.isfinite(values) & (values > above))
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            rule = "finite" if above is None else f"> {above:g}"
+            raise ValueError(f"parameter {base}[{k + 1}] = {values[k]:g} is invalid: must be {rule}")
         return values.copy()
+
+    def table_values(self, table: str, declared: tuple[Parameter, ...], given: dict) -> dict:
+        """``declared`` resolved from a description table (``"trajectory"``, ``"ik"``);
+        DescriptionError naming the file and the key."""
+        try:
+            return resolve(declared, given)
+        except ParameterError as exc:
+            raise DescriptionError(self.description.path, f"{table}.{exc.name}", exc.problem) from None
+
+    def table_error(self, table: str, key: str, problem: str):
+        """Raise DescriptionError for ``table.key`` of this robot's description."""
+        raise DescriptionError(self.description.path, f"{table}.{key}", problem)
 
     def warn(self, text: str) -> None:
         self.logger("warning", text)

@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..ik import Unreachable, solver_class
-from ..parameters import resolve
 from .base import Block, vector_names
 
 
@@ -23,9 +22,12 @@ class IKBlock(Block):
     def declare(self):
         choice = self.description.ik
         if choice is None:
-            raise ValueError(f"{self.description.path}: robot has no [ik] table")
-        self.solver_type = solver_class(choice.kind)
-        values = resolve(self.solver_type.parameters, choice.parameters, f"{self.description.path}: [ik]")
+            self.table_error("ik", "solver", "the robot has no [ik] table")
+        try:
+            self.solver_type = solver_class(choice.kind)
+        except ValueError as exc:
+            self.table_error("ik", "solver", str(exc))
+        values = self.table_values("ik", self.solver_type.parameters, choice.parameters)
         for p in self.solver_type.parameters:
             self.declare_parameter(p, values[p.name])
         robot = self.robot

@@ -27,7 +27,7 @@ class PlantBlock(Block):
             self.real("payload_mass", "parameter", "kg", "Point mass carried at the payload frame while "
                       "grip is true", d.payload.mass, low=0.0)
         self.real("max_substep", "parameter", "s", "Largest RK4 sub-step inside a communication step",
-                  1e-3, low=0.0)
+                  1e-3, above=0.0)
         self.reals("q0", n, "parameter", u0, "Joint {i} initial position (default: home)",
                    starts=robot.configuration("home"))
         self.reals("qd0", n, "parameter", u1, "Joint {i} initial velocity")
@@ -44,8 +44,6 @@ class PlantBlock(Block):
     def configure(self):
         self.robot.set_gravity(self.parameter("g"))
         max_substep = self.parameter("max_substep")
-        if max_substep <= 0.0:
-            raise ValueError(f"parameter max_substep = {max_substep:g} s is invalid: must be > 0")
         self.plant = Plant(self.robot, self.finite_vector("q0"), self.finite_vector("qd0"),
                            payload_mass=self.parameter("payload_mass") if self.has_payload else 0.0,
                            max_substep=max_substep)

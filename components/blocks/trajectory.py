@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..parameters import Parameter, resolve
+from ..parameters import Parameter
 from ..trajectory import StraightLine, SynchronizedBangBang, WaypointTrajectory
 from .base import Block
 from .text import format_matrix, format_vector, parse_matrix, parse_vector
@@ -30,10 +30,17 @@ class _Reference(Block):
             out.append(self.reals(base, n, "output", unit, lambda i, w=what: describe(i, w), depends=[]))
         self.outputs = out
 
-    def defaults(self, declared: tuple[Parameter, ...]) -> dict:
-        """The description's ``[trajectory]`` values for ``declared`` (validated)."""
+    def given(self, vectors: dict[str, int]) -> tuple[dict, dict]:
+        """The description's ``[trajectory]`` values: the vectors (checked for their lengths) and
+        the rest."""
         given = dict(self.description.trajectory.parameters)
-        return resolve(declared, given, f"{self.description.path}: [trajectory]") if declared else given
+        for key, length in vectors.items():
+            value = given.get(key)
+            if value is None:
+                self.table_error("trajectory", key, "missing")
+            if not isinstance(value, list) or (length and len(value) != length):
+                self.table_error("trajectory", key, f"needs {length or 'a list of'} values, got {value!r}")
+        return {k: given.pop(k) for k in vectors}, given
 
     def output(self, t):
         p, v, a = self.outputs
@@ -64,7 +71,7 @@ class WaypointsBlock(_Reference):
     settings_declared = (
         Parameter("pause", "Real", "s", "Rest between two moves", 0.0, low=0.0),
         Parameter("cruise_factor", "Real", "1", "Cruise speed over the move's mean speed, in (1, 2]", 1.5,
-                  low=1.0, high=2.0),
+                  above=1.0, high=2.0),
         Parameter("grip_close_after_move", "Integer", "", "The gripper closes at the end of this move "
                   "(1-based; 0: never)", 0, low=0),
         Parameter("grip_open_after_move", "Integer", "", "The gripper opens at the end of this move "
@@ -72,13 +79,9 @@ class WaypointsBlock(_Reference):
     )
 
     def declare(self):
-        given = dict(self.description.trajectory.parameters)
-        where = f"{self.description.path}: [trajectory]"
-        for key in ("waypoints", "durations"):
-            if key not in given:
-                raise ValueError(f"{where}: parameter {key!r} missing")
-        values = resolve(self.settings_declared, {k: v for k, v in given.items()
-                                                  if k not in ("waypoints", "durations")}, where)
+        vectors, rest = self.given({"waypoints": 0, "durations": 0})
+        given = {**vectors, **rest}
+        values = self.table_values("trajectory", self.settings_declared, rest)
         coords, units = _task(self)
         self.string_parameter("waypoints", f"Waypoints ({', '.join(units[0])}), one row per point "
                               "('x y z'), rows separated by ';'", format_matrix(given["waypoints"]))
@@ -123,20 +126,16 @@ class LineBlock(_Reference):
     summary = ("task-space straight line at minimum time with a trapezoidal speed profile (v_max, "
                "a_max), then at rest; outputs at time t belong to t")
     scalars = (
-        Parameter("length", "Real", "m", "Path length", None, low=0.0),
-        Parameter("v_max", "Real", "m/s", "Speed limit along the path", None, low=0.0),
-        Parameter("a_max", "Real", "m/s2", "Acceleration limit along the path", None, low=0.0),
+        Parameter("length", "Real", "m", "Path length", None, above=0.0),
+        Parameter("v_max", "Real", "m/s", "Speed limit along the path", None, above=0.0),
+        Parameter("a_max", "Real", "m/s2", "Acceleration limit along the path", None, above=0.0),
     )
 
     def declare(self):
-        given = dict(self.description.trajectory.parameters)
-        where = f"{self.description.path}: [trajectory]"
         coords, units = _task(self)
         m = len(coords)
-        for key in ("start", "direction"):
-            if len(given.get(key, ())) != m:
-                raise ValueError(f"{where}: parameter {key!r} needs {m} values")
-        values = resolve(self.scalars, {k: v for k, v in given.items() if k not in ("start", "direction")}, where)
+        given, rest = self.given({"start": m, "direction": m})
+        values = self.table_values("trajectory", self.scalars, rest)
         self.start = self.reals("start", m, "parameter", units[0],
                                 lambda i: f"Start point, coordinate {coords[i - 1]}", given["start"])
         self.direction = self.reals("direction", m, "parameter", "1",
@@ -148,15 +147,12 @@ class LineBlock(_Reference):
                              lambda i, w: f"Reference task {w} along {coords[i - 1]}")
 
     def configure(self):
-        self.profile = StraightLine(self.finite_vector("start"), self.finite_vector("direction"),
-                                    self.positive("length"), self.positive("v_max"), self.positive("a_max"))
+        direction = self.finite_vector("direction")
+        if not direction.any():
+            raise ValueError("parameter direction = (0, ..., 0) is invalid: must not be the zero vector")
+        self.profile = StraightLine(self.finite_vector("start"), direction, self.parameter("length"),
+                                    self.parameter("v_max"), self.parameter("a_max"))
         super().configure()
-
-    def positive(self, name):
-        value = self.parameter(name)
-        if value <= 0.0:
-            raise ValueError(f"parameter {name} = {value:g} is invalid: must be > 0")
-        return value
 
 
 class JointBangBangBlock(_Reference):
@@ -165,15 +161,9 @@ class JointBangBangBlock(_Reference):
                "finishes at the slowest joint's minimum time), then at rest; outputs at t belong to t")
 
     def declare(self):
-        given = dict(self.description.trajectory.parameters)
-        where = f"{self.description.path}: [trajectory]"
         n = self.robot.n
-        unknown = sorted(set(given) - {"q_start", "q_end", "a_max"})
-        if unknown:
-            raise ValueError(f"{where}: unknown parameter {unknown[0]!r} (known: a_max, q_end, q_start)")
-        for key in ("q_start", "q_end", "a_max"):
-            if len(given.get(key, ())) != n:
-                raise ValueError(f"{where}: parameter {key!r} needs {n} values")
+        given, rest = self.given({"q_start": n, "q_end": n, "a_max": n})
+        self.table_values("trajectory", (), rest)            # refuses any other key
         units = [self.robot.joint_units(k) for k in range(3)]
         self.reals("q_start", n, "parameter", units[0], "Joint {i} start position (at rest)", given["q_start"])
         self.reals("q_end", n, "parameter", units[0], "Joint {i} end position (at rest)", given["q_end"])
@@ -183,5 +173,5 @@ class JointBangBangBlock(_Reference):
 
     def configure(self):
         self.profile = SynchronizedBangBang(self.finite_vector("q_start"), self.finite_vector("q_end"),
-                                            self.finite_vector("a_max"))
+                                            self.finite_vector("a_max", above=0.0))
         super().configure()

@@ -15,7 +15,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..parameters import Parameter, resolve
+from ..parameters import Parameter, ParameterError, resolve
 from ..robots.model import RobotModel
 
 _SOLVERS: dict[str, type["IKSolver"]] = {}
@@ -55,7 +55,10 @@ class IKSolver:
 
     def __init__(self, robot: RobotModel, **values):
         self.robot = robot
-        self.values = resolve(self.parameters, values, f"IK solver {self.kind!r}")
+        try:
+            self.values = resolve(self.parameters, values)
+        except ParameterError as exc:
+            raise ValueError(f"IK solver {self.kind!r}: {exc}") from None
         self.constraint_rows = np.zeros((0, robot.n))
         self.setup()
         rows = robot.m + len(self.constraint_rows)

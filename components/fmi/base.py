@@ -20,6 +20,7 @@ import ctypes
 import math
 import sys
 import traceback
+from pathlib import Path
 from xml.etree.ElementTree import Element
 
 import numpy as np
@@ -30,6 +31,7 @@ from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variabil
 from .. import SOURCE_HASH, check_bundle
 from ..blocks import StepRefused, block_type
 from ..robots import load_description, load_model
+from ..robots.description import read
 from .model_description import VENDOR_TOOL, complete  # noqa: F401  (VENDOR_TOOL: public here)
 
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
@@ -63,7 +65,7 @@ class BlockSlave(Fmi2Slave):
             check_bundle(self.resources)
         if not self.robot_name or not self.block_kind:
             raise TypeError(f"{type(self).__name__}: robot_name and block_kind must be set")
-        description = load_description(self.robot_name)
+        description = self._own_description()
         self.logic = block_type(description, self.block_kind)(load_model(description))
         self.logic.logger = self._log_from_block
         self.author = "robofmu"
@@ -87,6 +89,18 @@ class BlockSlave(Fmi2Slave):
         self._input_mask = self._input_real.astype(float)
         self._indices: dict[tuple, np.ndarray] = {}
         self._names = [v.name for v in self.logic.variables]
+
+    def _own_description(self):
+        """The robot's description from this FMU's own resources folder.
+
+        All pythonfmu FMUs of a process share one interpreter, so the robofmu package is the one
+        imported first, perhaps from another FMU's extraction folder that its importer has since
+        deleted. Robot data (TOML, URDF) is therefore read from this instance's own folder, which
+        lives as long as the instance."""
+        if not self.resources:
+            return load_description(self.robot_name)
+        return read(Path(self.resources) / "robofmu" / "components" / "robots" / self.robot_name
+                    / f"{self.robot_name}.toml")
 
     # -- variables --------------------------------------------------------------------------------
     def _register(self, v) -> None:

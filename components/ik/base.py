@@ -58,7 +58,7 @@ class IKSolver:
         try:
             self.values = resolve(self.parameters, values)
         except ParameterError as exc:
-            raise ValueError(f"IK solver {self.kind!r}: {exc}") from None
+            raise ValueError(f"IK solver {self.kind!r}: {exc.problem}") from None
         self.constraint_rows = np.zeros((0, robot.n))
         self.setup()
         rows = robot.m + len(self.constraint_rows)

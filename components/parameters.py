@@ -90,12 +90,12 @@ def resolve(declared: tuple[Parameter, ...], given: dict[str, Any], where: str =
     names = {p.name for p in declared}
     unknown = sorted(set(given) - names)
     if unknown:
-        raise ParameterError(unknown[0], f"unknown parameter (known: {', '.join(sorted(names)) or 'none'})")
+        raise ParameterError(unknown[0], f"unknown parameter {unknown[0]!r} (known: {', '.join(sorted(names)) or 'none'})")
     values = {}
     for p in declared:
         value = given.get(p.name, p.default)
         if value is None:
-            raise ParameterError(p.name, "missing")
+            raise ParameterError(p.name, f"parameter {p.name!r} missing")
         try:
             values[p.name] = p.validate(value)
         except ValueError as exc:

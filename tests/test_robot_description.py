@@ -183,13 +183,13 @@ def test_unknown_profile_and_solver_parameters_are_refused_naming_file_and_key(c
     """[trajectory] and [ik] hold the parameters of a registered profile or solver: the block
     (and the solver) that reads them refuses an unknown one, naming the file and the key."""
     path = copy_robot("rrp", lambda d: set_key(d, "trajectory.lenght", 0.03125))
-    with pytest.raises(DescriptionError, match=re.escape(f"{path}: trajectory.lenght: unknown parameter (known: a_max, length, v_max)")):
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: trajectory.lenght: unknown parameter 'lenght' (known: a_max, length, v_max)")):
         make_block(read(path), "trajectory")
     path = copy_robot("rpp", lambda d: set_key(d, "trajectory.q_end", [1.0, 2.0]))
     with pytest.raises(DescriptionError, match=re.escape(f"{path}: trajectory.q_end: needs 3 values")):
         make_block(read(path), "trajectory")
     path = copy_robot("chess", lambda d: set_key(d, "ik.wrist", "left"))
-    with pytest.raises(DescriptionError, match=re.escape(f"{path}: ik.wrist: unknown parameter")):
+    with pytest.raises(DescriptionError, match=re.escape(f"{path}: ik.wrist: unknown parameter 'wrist'")):
         make_block(read(path), "ik")
     path = copy_robot("chess", lambda d: set_key(d, "ik.elbow", "sideways"))
     with pytest.raises(DescriptionError, match=re.escape(f"{path}: ik.elbow: parameter elbow = 'sideways' is invalid")):

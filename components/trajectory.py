@@ -135,6 +135,12 @@ class WaypointTrajectory:
                            ("grip_open_after_move", grip_open_after_move)):
             if not (0 <= move <= k):
                 raise ValueError(f"{name}: must be 0 (never) or a move number 1..{k}, got {move}")
+        if grip_open_after_move and not grip_close_after_move:
+            raise ValueError(f"grip_open_after_move = {grip_open_after_move}: the gripper never closes "
+                             "(grip_close_after_move = 0)")
+        if grip_close_after_move and grip_open_after_move and grip_open_after_move <= grip_close_after_move:
+            raise ValueError(f"grip_open_after_move = {grip_open_after_move} must come after "
+                             f"grip_close_after_move = {grip_close_after_move}")
         self.waypoints = w
         self.durations = d
         self.pause = float(pause)

@@ -290,16 +290,24 @@ def test_fmu_state_rollback_reproduces_the_outputs_bit_for_bit(fmu_root, robot, 
         assert second == first                      # every output, every step, exactly
         if block == "ik":
             assert first[0][-1] is False and first[1][-1] is True       # the excursion at k = 5
-        # negative control: without rollback the outputs are those of the later state
+        # negative controls: without rollback the outputs are those of the later state, and a
+        # step from the saved time is refused (the communication point jumps backwards)
         assert read_outputs(b) != at_save
-        third = drive(b, robot, block, 5, 5)
-        if block in STATEFUL:
-            assert third != first                   # internal state moved on
-        else:                                       # outputs are a function of time and inputs:
-            assert third[1:] == first[1:]           # the same after the first doStep
+        with pytest.raises(FMUError, match="does not continue from the instance's time"):
+            drive(b, robot, block, 5, 1)
         b.free_state(state)
     finally:
         b.close()
+    # a fresh instance starting at the saved time lacks the saved internal state
+    fresh = open_block(fmu_root / robot, block, parameters=parameters, start_time=5 * H)
+    try:
+        third = drive(fresh, robot, block, 5, 5)
+    finally:
+        fresh.close()
+    if block in STATEFUL:
+        assert third != first                       # the saved state mattered
+    else:                                           # outputs are a function of time and inputs:
+        assert third[1:] == first[1:]               # the same after the first doStep
 
 
 # -- bad input ---------------------------------------------------------------------------------------

@@ -150,11 +150,16 @@ def test_fmu_state_rollback_is_bit_for_bit(fmu_root):
     second = [loop.step(h) for _ in range(300)]
     assert first == second                   # every output, every step, exactly
     assert len(first[0]) == 3 * 3 + 1 + 3 * 4 + 1 + 4 + 2 * 4     # trajectory, ik, controller, plant
-    # negative control: restoring every block but the controller (whose integral term has moved
-    # on) changes the outputs, so the controller's internal state is part of what is restored
-    loop.set_states({k: v for k, v in states.items() if k != "controller"}, t_saved)
+    # negative control: the controller's state saved at the same time by a loop whose arm started
+    # elsewhere (same blocks, same controller parameters, another integral) changes the outputs,
+    # so the controller's internal state is part of what is restored
+    other = Loop("chess-pid-unknown-pawn", fmu_root, {"plant": {"q0": [0.01, 0.76, -2.36, 0.04]}})
+    for _ in range(500):
+        other.step(h)
+    loop.set_states({**states, "controller": other.get_states()["controller"]}, t_saved)
     third = [loop.step(h) for _ in range(300)]
     assert third != first
+    other.close()
     loop.close()
 
 

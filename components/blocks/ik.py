@@ -1,7 +1,8 @@
 """IK block: joint reference (q, qd, qdd) from the task-space reference, direct feedthrough.
 
 The solver is the one the robot's description names; its declared parameters become the
-block's. Outside the workspace (or at a singularity) ``reachable`` is false, one warning is
+block's. A target whose joint rates exceed ``qd_limit`` (default: the URDF's velocity limits) is
+too close to a singularity and counts as not reachable. Outside the workspace (or at a singularity) ``reachable`` is false, one warning is
 logged per excursion, and the block holds its last valid position with zero velocity and
 acceleration (zeros before it has one).
 """
@@ -31,6 +32,10 @@ class IKBlock(Block):
         for p in self.solver_type.parameters:
             self.declare_parameter(p, values[p.name])
         robot = self.robot
+        self.reals("qd_limit", robot.n, "parameter", robot.joint_units(1),
+                   "Joint {i}: the largest rate the IK passes on (default: the URDF's velocity limit); "
+                   "a target needing more is too close to a singularity and counts as not reachable",
+                   starts=robot.velocity_limits())
         coords, m, n = robot.task_coordinates, robot.m, robot.n
         start = robot.fk(robot.configuration("home"))
         xs, xds, xdds = (vector_names(b, m) for b in ("x_ref", "xd_ref", "xdd_ref"))
@@ -54,6 +59,7 @@ class IKBlock(Block):
     def configure(self):
         values = {p.name: self.parameter(p.name) for p in self.solver_type.parameters}
         self.solver = self.solver_type(self.robot, **values)
+        self.qd_limit = self.finite_vector("qd_limit", above=0.0)
         self.last = None
         self.outside = False
         super().configure()
@@ -62,6 +68,12 @@ class IKBlock(Block):
         v = self.values
         try:
             q, qd, qdd = self.solver.solve(v[self.x], v[self.xd], v[self.xdd])
+            ratio = np.abs(qd) / self.qd_limit
+            fastest = int(np.argmax(ratio))
+            if ratio[fastest] > 1.0:
+                raise Unreachable(f"too close to a singularity: joint rate qd_ref[{fastest + 1}] = "
+                                  f"{qd[fastest]:.6g} exceeds qd_limit[{fastest + 1}] = "
+                                  f"{self.qd_limit[fastest]:g} at q = {np.round(q, 6).tolist()}")
         except Unreachable as exc:
             if not self.outside:
                 held = ("holding the last valid solution" if self.last is not None else

@@ -5,10 +5,15 @@ state defaults to the description's ``home`` configuration at rest.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..plant import Plant, PlantDiverged
 from .base import Block, StepRefused
+
+#: More RK4 sub-steps than this in one communication step is a mistake (an hour-long step).
+MAX_SUBSTEPS = 1_000_000
 
 
 class PlantBlock(Block):
@@ -60,6 +65,10 @@ class PlantBlock(Block):
         self.values[self.q], self.values[self.qd] = self.plant.q, self.plant.qd
 
     def advance(self, t, h):
+        substeps = math.ceil(h / self.plant.max_substep - 1e-9)
+        if substeps > MAX_SUBSTEPS:
+            raise StepRefused(f"a step of {h:g} s needs {substeps} RK4 sub-steps of max_substep = "
+                              f"{self.plant.max_substep:g} s (at most {MAX_SUBSTEPS}); step refused")
         self._grip()
         try:
             self.plant.step(self.values[self.tau], h, t)

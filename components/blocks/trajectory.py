@@ -42,6 +42,20 @@ class _Reference(Block):
                 self.table_error("trajectory", key, f"needs {length or 'a list of'} values, got {value!r}")
         return {k: given.pop(k) for k in vectors}, given
 
+    def configure(self):
+        """Refuse a profile whose reference is not finite anywhere (checked at and between its
+        breakpoints, where its extremes lie)."""
+        breaks = np.asarray(self.profile.breakpoints, dtype=float)
+        times = np.concatenate([breaks, (breaks[:-1] + breaks[1:]) / 2])
+        for t in times:
+            with np.errstate(all="ignore"):
+                values = self.profile.evaluate(float(t))
+            for what, value in zip(("position", "velocity", "acceleration"), values):
+                if not np.all(np.isfinite(value)):
+                    raise ValueError(f"the parameters give a non-finite reference {what} at t = {t:g} s "
+                                     f"({np.asarray(value).tolist()})")
+        super().configure()
+
     def output(self, t):
         p, v, a = self.outputs
         self.values[p], self.values[v], self.values[a] = self.profile.evaluate(t, self.snap)

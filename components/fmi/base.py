@@ -17,6 +17,7 @@ writes completed by :mod:`.model_description`.
 from __future__ import annotations
 
 import ctypes
+import json
 import math
 import sys
 import traceback
@@ -76,7 +77,9 @@ class BlockSlave(Fmi2Slave):
         self.time = 0.0
         self._dirty = True
         self._initialized = False
+        self._terminated = False
         self._held_warned = False
+        self._bad_output: str | None = None     # why the outputs are held (the next step fails)
         for var in self.logic.variables:
             self._register(var)
         self.values = self.logic.values
@@ -87,6 +90,8 @@ class BlockSlave(Fmi2Slave):
         self._settable_real = self._input_real | (self._real & (causalities == "parameter"))
         self._input_vrs = np.flatnonzero(self._input_real)
         self._input_mask = self._input_real.astype(float)
+        self._output_slots = np.flatnonzero(self._real & (causalities == "output"))
+        self._parameter_slots = np.flatnonzero(self._real & (causalities == "parameter"))
         self._indices: dict[tuple, np.ndarray] = {}
         self._names = [v.name for v in self.logic.variables]
 
@@ -214,16 +219,35 @@ class BlockSlave(Fmi2Slave):
 
     # -- FMI life cycle -----------------------------------------------------------------------------
     def setup_experiment(self, start_time: float, stop_time=None, tolerance=None):
+        if self._initialized:
+            self._raise_to_importer("fmi2SetupExperiment: the instance is already initialized")
+        if not math.isfinite(start_time):
+            self._raise_to_importer(f"fmi2SetupExperiment: start time {start_time} is not finite")
         self.time = float(start_time)
 
+    def enter_initialization_mode(self):
+        if self._initialized or self._terminated:
+            self._raise_to_importer("fmi2EnterInitializationMode: the instance is already "
+                                    + ("terminated" if self._terminated else "initialized")
+                                    + "; instantiate a new one")
+
     def exit_initialization_mode(self):
+        if self._initialized or self._terminated:
+            self._raise_to_importer("fmi2ExitInitializationMode: the instance is already "
+                                    + ("terminated" if self._terminated else "initialized"))
         try:
             self.logic.configure()
             self.logic.output(self.time)
         except Exception as exc:
             self._raise_to_importer(f"initialization failed: {exc}")
+        bad = self._nonfinite_output()
+        if bad is not None:
+            self._raise_to_importer(f"initialization failed: {bad}")
         self._initialized = True
         self._dirty = False
+
+    def terminate(self):
+        self._terminated = True
 
     def _raise_to_importer(self, message: str):
         """Log ``message`` as an error, then make the current FMI call fail.
@@ -240,7 +264,25 @@ class BlockSlave(Fmi2Slave):
             ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
         raise RuntimeError(f"{self.instance_name}: {message}")
 
+    def _nonfinite_output(self) -> str | None:
+        """Why the outputs just computed are not finite (naming the largest input), or None."""
+        outputs = self.values[self._output_slots]
+        if math.isfinite(float(outputs.sum())):
+            return None
+        k = int(self._output_slots[np.flatnonzero(~np.isfinite(outputs))[0]])
+        cause = ""
+        if self._input_vrs.size:
+            inputs = np.abs(self.values[self._input_vrs])
+            j = int(self._input_vrs[int(np.argmax(inputs))])
+            cause = f" for input {self._names[j]} = {self.values[j]:g}"
+        if self._parameter_slots.size:
+            j = int(self._parameter_slots[int(np.argmax(np.abs(self.values[self._parameter_slots])))])
+            cause += f" (largest parameter {self._names[j]} = {self.values[j]:g})"
+        return f"output {self._names[k]} would be {self.values[k]}{cause}"
+
     def _output_safely(self) -> None:
+        """Outputs at the current time from the current inputs; never a non-finite one: a
+        non-finite input or output holds the previous outputs and makes the next step fail."""
         bad = self.nonfinite_input()
         if bad is not None:
             if not self._held_warned:
@@ -248,20 +290,49 @@ class BlockSlave(Fmi2Slave):
                           "last values; the next step will fail")
                 self._held_warned = True
             return
+        held = self.values[self._output_slots].copy()
         try:
             self.logic.output(self.time)
-            self._dirty = False
         except Exception as exc:
-            self.log(f"{self.instance_name}: evaluating outputs at t = {self.time:.9g} s failed: "
-                     f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", Fmi2Status.error)
+            self.values[self._output_slots] = held
+            self._bad_output = f"evaluating outputs failed: {type(exc).__name__}: {exc}"
+            self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}\n"
+                     f"{traceback.format_exc()}", Fmi2Status.error)
+            return
+        bad = self._nonfinite_output()
+        if bad is not None:
+            self.values[self._output_slots] = held
+            self._bad_output = f"{bad}: outputs held at their last values"
+            self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
+            return
+        self._bad_output = None
+        self._dirty = False
+
+    def _step_problem(self, current_time: float, step_size: float) -> str | None:
+        """Why ``fmi2DoStep(current_time, step_size)`` cannot run now, or None."""
+        if self._terminated:
+            return "fmi2DoStep: the instance is terminated"
+        if not self._initialized:
+            return "fmi2DoStep: called before fmi2ExitInitializationMode"
+        if not (math.isfinite(step_size) and step_size > 0.0):
+            return f"fmi2DoStep: communication step h = {step_size} s is invalid: must be finite and > 0"
+        if not math.isfinite(current_time) or abs(current_time - self.time) > 1e-9 * max(1.0, abs(self.time)):
+            return (f"fmi2DoStep: communication point t = {current_time!r} s does not continue from the "
+                    f"instance's time {self.time!r} s (restore a saved FMU state to go back)")
+        return None
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        problem = self._step_problem(current_time, step_size)
+        if problem is not None:
+            return self.fail(problem)
         try:
             bad = self.nonfinite_input()
             if bad is not None:
                 return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
             if self._dirty:
-                self.logic.output(current_time)     # the state a feedthrough block keeps (IK's last solution)
+                self._output_safely()          # the state a feedthrough block keeps (IK's last solution)
+            if self._bad_output is not None:
+                return self.fail(f"t = {current_time:.9g} s: {self._bad_output}; step refused")
             self.logic.advance(current_time, step_size)
         except StepRefused as exc:
             return self.fail(str(exc))
@@ -274,18 +345,77 @@ class BlockSlave(Fmi2Slave):
         return True
 
     # -- FMU state ------------------------------------------------------------------------------------
+    def _identity(self) -> dict:
+        return {"robot": self.robot_name, "block": self.block_kind, "variant": self.logic.variant,
+                "source": SOURCE_HASH}
+
+    def _parameters(self) -> dict:
+        values = {self._names[k]: float(self.values[k]) for k in self._parameter_slots}
+        values.update({v.name: self.logic.settings[v.name] for v in self.logic.variables
+                       if v.causality == "parameter" and v.kind != "Real"})
+        return values
+
     def _get_fmu_state(self):
-        return {"time": self.time, "values": self.values.tolist(), "settings": dict(self.logic.settings),
-                "dirty": self._dirty, "initialized": self._initialized,
-                "logic": self.logic.internal_state()}
+        return {"identity": self._identity(), "parameters": self._parameters(), "time": self.time,
+                "values": self.values.tolist(), "settings": dict(self.logic.settings),
+                "dirty": self._dirty, "initialized": self._initialized, "terminated": self._terminated,
+                "bad_output": self._bad_output, "logic": self.logic.internal_state()}
+
+    def _state_problem(self, state) -> str | None:
+        """Why ``state`` cannot be restored into this instance, or None."""
+        keys = {"identity", "parameters", "time", "values", "settings", "dirty", "initialized",
+                "terminated", "bad_output", "logic"}
+        if isinstance(state, dict) and set(state) == {"corrupt"}:
+            return str(state["corrupt"])
+        if not isinstance(state, dict) or set(state) != keys:
+            return "the state is not a robofmu block state (corrupt or from another FMU)"
+        theirs, mine = state["identity"], self._identity()
+        if theirs != mine:
+            what = [f"{k} {theirs.get(k)!r} (this instance: {mine[k]!r})" for k in mine if theirs.get(k) != mine[k]]
+            return "the state belongs to another block: " + ", ".join(what)
+        values = state["values"]
+        if (not isinstance(values, list) or len(values) != len(self.values)
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)):
+            return "the state's values are corrupt"
+        if not math.isfinite(sum(float(v) for v in values)) or not isinstance(state["time"], (int, float)) \
+                or not math.isfinite(state["time"]):
+            return "the state holds non-finite values"
+        if self._initialized and state["initialized"] and state["parameters"] != self._parameters():
+            mine_p = self._parameters()
+            differ = [f"{k} = {v!r} (this instance: {mine_p.get(k)!r})" for k, v in state["parameters"].items()
+                      if mine_p.get(k) != v]
+            return "the state was saved with other parameters: " + ", ".join(differ[:4])
+        return None
 
     def _set_fmu_state(self, state):
-        self.time = state["time"]
+        problem = self._state_problem(state)
+        if problem is not None:
+            self._raise_to_importer(f"fmi2SetFMUstate: {problem}; nothing restored")
+        saved = self._get_fmu_state()
+        try:
+            self._apply_state(state)
+        except Exception as exc:
+            self._apply_state(saved)
+            self._raise_to_importer(f"fmi2SetFMUstate: {type(exc).__name__}: {exc}; nothing restored")
+
+    def _apply_state(self, state) -> None:
+        self.time = float(state["time"])
         self.values[:] = state["values"]
         self.logic.settings.update(state["settings"])
-        self._dirty = state["dirty"]
-        self._initialized = state["initialized"]
+        self._dirty = bool(state["dirty"])
+        self._initialized = bool(state["initialized"])
+        self._terminated = bool(state["terminated"])
+        self._bad_output = state["bad_output"]
         self.logic.set_internal_state(state["logic"])
+
+    @staticmethod
+    def _fmu_state_from_bytes(data: bytes):
+        """A serialized state back. pythonfmu calls this on the class, so it cannot log: a
+        corrupt state comes back as a marker that fmi2SetFMUstate refuses, naming the cause."""
+        try:
+            return json.loads(bytes(data).decode("utf-8"))
+        except (ValueError, UnicodeDecodeError) as exc:
+            return {"corrupt": f"the serialized state is corrupt ({exc})"}
 
     # -- model description ----------------------------------------------------------------------------
     def to_xml(self, model_options=dict()) -> Element:

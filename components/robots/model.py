@@ -71,6 +71,10 @@ class RobotModel(ABC):
     def position_limits(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper joint position limits (rad, m), each shape (n,) (+/- inf where none)."""
 
+    @abstractmethod
+    def velocity_limits(self) -> np.ndarray:
+        """Joint velocity limits (rad/s, m/s), shape (n,)."""
+
     # -- parameters ---------------------------------------------------------------------------
     @abstractmethod
     def set_gravity(self, magnitude: float) -> None:

@@ -66,6 +66,10 @@ class SerialRobot(RobotModel):
         """The URDF's joint limits (Pinocchio's lower/upperPositionLimit)."""
         return self.model.lowerPositionLimit.copy(), self.model.upperPositionLimit.copy()
 
+    def velocity_limits(self) -> np.ndarray:
+        """The URDF's joint velocity limits (Pinocchio's velocityLimit)."""
+        return self.model.velocityLimit.copy()
+
     # -- parameters -------------------------------------------------------------------------
     def set_gravity(self, magnitude: float) -> None:
         self.gravity = float(magnitude)

@@ -292,7 +292,8 @@ class BlockSlave(Fmi2Slave):
             return
         held = self.values[self._output_slots].copy()
         try:
-            self.logic.output(self.time)
+            with np.errstate(all="ignore"):    # an overflow is reported below, not as a host warning
+                self.logic.output(self.time)
         except Exception as exc:
             self.values[self._output_slots] = held
             self._bad_output = f"evaluating outputs failed: {type(exc).__name__}: {exc}"
@@ -333,7 +334,8 @@ class BlockSlave(Fmi2Slave):
                 self._output_safely()          # the state a feedthrough block keeps (IK's last solution)
             if self._bad_output is not None:
                 return self.fail(f"t = {current_time:.9g} s: {self._bad_output}; step refused")
-            self.logic.advance(current_time, step_size)
+            with np.errstate(all="ignore"):
+                self.logic.advance(current_time, step_size)
         except StepRefused as exc:
             return self.fail(str(exc))
         except Exception as exc:

@@ -109,6 +109,18 @@ def step_section(plan: dict, out: Path, fmu_dir) -> list[str]:
             rows.append([robot, label, f"{m.rise_time:.4f}", f"{m.settling_time:.4f}", f"{m.overshoot:.2f}",
                          f"{cmp.max_deviation('sampled'):.3f}", f"{cmp.max_deviation('zoh'):.3f}"])
             figures.append(f"![{robot} {label}](step/{figure.name})")
+    design = plan.get("design")
+    if design:
+        gains = sr.design_gains(design["settling_time"], design["overshoot"])
+        label = f"designed for {design['settling_time']:g} s, {design['overshoot']:g} %"
+        for robot in design["robots"]:
+            cmp = sr.compare(sr.cosimulate_step(fmu_dir, gains.kp, gains.kd, gains.ki, robot=robot))
+            figure = sr.plot_comparison(cmp, out / "step", name=f"step_{robot}_designed")
+            m = cmp.metrics[next(iter(cmp.metrics))]
+            rows.append([robot, f"{label}: kp {gains.kp:.4g}, kd {gains.kd:.4g}, ki {gains.ki:.4g}",
+                         f"{m.rise_time:.4f}", f"{m.settling_time:.4f}", f"{m.overshoot:.2f}",
+                         f"{cmp.max_deviation('sampled'):.3f}", f"{cmp.max_deviation('zoh'):.3f}"])
+            figures.append(f"![{robot} {label}](step/{figure.name})")
     lines += [markdown_table(rows, ["robot", "gains", "rise (s)", "settling (s)", "overshoot (%)",
                                     "max dev. from sampled-data model (% of step)",
                                     "max dev. from c2d ZOH (% of step)"]), "", *figures, ""]

@@ -1,5 +1,5 @@
-"""Each chess FMU runs through libcosim (the Open Simulation Platform's co-simulation library),
-driven from Python by libcosimpy, alone and all together in one execution.
+"""Each chess FMU (and every robot's plant) runs through libcosim (the Open Simulation Platform's
+co-simulation library), driven from Python by libcosimpy, alone and all together in one execution.
 
 How the FMUs are loaded: in this very process. libcosimpy calls libcosimc through
 ``ctypes.CDLL``, which releases the GIL during every call; libcosim extracts each FMU to its own
@@ -47,8 +47,8 @@ pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installe
 
 from fmpy import simulate_fmu  # noqa: E402
 
-from robofmu.components.ik import ChessIK  # noqa: E402
-from robofmu.components.robot import Robot  # noqa: E402
+from robofmu.components.ik import make_solver  # noqa: E402
+from robofmu.components.robots import load_description, load_model  # noqa: E402
 from robofmu.system.libcosim import CosimRun  # noqa: E402
 
 STEP = 1e-3            # s, communication step of libcosim's fixed-step algorithm
@@ -133,22 +133,26 @@ def test_trajectory_lspb_closed_form(cosim, fmu_dir):
     np.testing.assert_allclose(z, [lspb_z(t) for t in times], atol=1e-12)
 
 
-def test_plant_free_fall_matches_fmpy(cosim, fmu_dir):
-    path = fmu_dir / "plant.fmu"
+def test_plant_free_fall_matches_fmpy(cosim, fmu_root, robot):
+    path = fmu_root / robot / "plant.fmu"
+    n = load_model(robot).n
     run = cosim()
-    run.add(path, "plant")                      # tau, grip: their start values 0, false
+    run.add(path, "plant")                      # tau (and chess's grip): their start values 0 (false)
     run.observe_series("plant", "q")
     run.step(N_STEPS)
     times, q = series(run, "plant", "q")
-    assert q.shape == (N_STEPS + 1, 4)
+    assert q.shape == (N_STEPS + 1, n)
 
-    names = [f"q[{i}]" for i in range(1, 5)]
+    names = [f"q[{i}]" for i in range(1, n + 1)]
     ref = simulate_fmu(str(path), stop_time=T_END, step_size=STEP, output_interval=STEP, output=names)
-    q_ref = np.array([ref[n] for n in names]).T
+    q_ref = np.array([ref[name] for name in names]).T
     np.testing.assert_allclose(times, ref["time"], atol=1e-12)
     np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-9)
 
-    q0 = ChessIK(Robot("chess")).position(np.array([0.21, 0.0, 0.0]))   # default q0: waypoint 1
+    q0 = np.array(load_description(robot).configuration("home"))       # default q0: the robot's home
+    if robot == "chess":                                                # = IK of waypoint 1, to round-off
+        np.testing.assert_allclose(make_solver(load_model("chess")).position(np.array([0.21, 0.0, 0.0])), q0,
+                                   rtol=0, atol=1e-12)
     np.testing.assert_allclose(run.get("plant", "q0"), q0, atol=1e-12)
     np.testing.assert_allclose(q[0], q0, atol=1e-12)
     assert np.max(np.abs(q[-1] - q0)) > 0.05                            # it really fell
@@ -176,7 +180,7 @@ def test_ik_satisfies_closed_form_fk(cosim, fmu_dir):
 
 
 def test_controller_outputs_gravity_torque(cosim, fmu_dir):
-    robot = Robot("chess")
+    robot = load_model("chess")
     run = cosim()
     run.add(fmu_dir / "controller.fmu", "controller")   # all inputs 0, default gains (ki = 0)
     run.observe_series("controller", "tau")
@@ -215,7 +219,7 @@ def chess_execution(cosim, fmu_dir, q0_second):
 
 
 def test_all_fmus_and_a_second_plant_in_one_execution(cosim, fmu_dir):
-    robot = Robot("chess")
+    robot = load_model("chess")
     q0_second = [0.5, 0.3, -1.0, 0.2]
     run = chess_execution(cosim, fmu_dir, q0_second)
     assert run.execution.num_slaves() == 5

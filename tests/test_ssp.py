@@ -1,4 +1,8 @@
-"""chess-pd exported as an SSP 1.0 package, run by libcosim and by fmpy.ssp, against the master.
+"""Experiments exported as SSP 1.0 packages, run by libcosim and by fmpy.ssp, against the master.
+
+Every experiment (chess-pd, rrp-line, rpp-bangbang) exports a package that validates against
+the SSP schemas and that libcosim runs equal to the master's Jacobi run to rounding (the lone
+plant, too, for every robot). The rest is chess-pd's.
 
 What each tool's algorithm does with the loop trajectory -> ik -> controller -> plant (ik and
 controller have direct feedthrough, the plant has none; tau_k drives the plant's step from t_k,
@@ -45,42 +49,76 @@ import numpy as np
 import pytest
 
 from robofmu.components.control import ComputedTorque
-from robofmu.components.ik import make_ik
-from robofmu.components.robot import Robot, load_spec
+from robofmu.components.ik import make_solver
+from robofmu.components.robots import load_description, load_model
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
 from robofmu.system.ssp import NS, export_ssp, run_ssp_fmpy, run_ssp_libcosim, ssd_text
 
-STOP = 2.0                  # s: first move (0-1 s), pause, start of the second move
+STOP = 2.0                  # s: chess: first move (0-1 s), pause, start of the second move
 STEPS = (1e-3, 5e-4)        # s
 BLOCKS = ["trajectory", "ik", "controller", "plant"]
+EXPERIMENTS = ["chess-pd", "rrp-line", "rpp-bangbang"]
+#: Scalar connections of each experiment's loop (each wire expanded to its vector's length)
+CONNECTIONS = {
+    "chess-pd": 35,             # 3 x 3 + 3 x 4 + 2 x 4 + 4 + 2 (the grip twice)
+    "rrp-line": 30,             # 3 x 3 + 3 x 3 + 2 x 3 + 3 + 3 (plant.q -> fk.q)
+    "rpp-bangbang": 21,         # 3 x 3 + 2 x 3 + 3 + 3
+}
 
 
 @pytest.fixture(scope="module")
-def system(fmu_dir):
-    return load("chess-pd", fmu_dir=fmu_dir.parent)
-
-
-@pytest.fixture(scope="module")
-def ssp(system, tmp_path_factory):
-    return export_ssp(system, tmp_path_factory.mktemp("ssp") / "chess-pd.ssp")
-
-
-@pytest.fixture(scope="module")
-def runs(system, ssp):
-    """runs(tool, h) -> Result, each computed once: 'gs', 'jacobi' (master), 'libcosim', 'fmpy'."""
+def systems(fmu_root):
+    """systems(name) -> System of an experiment (one per module: runs share it)."""
     cache = {}
 
-    def get(tool, h):
-        if (tool, h) not in cache:
+    def get(name):
+        if name not in cache:
+            cache[name] = load(name, fmu_dir=fmu_root)
+        return cache[name]
+
+    return get
+
+
+@pytest.fixture(scope="module")
+def packages(systems, tmp_path_factory):
+    """packages(name) -> the experiment's exported ``<name>.ssp``, written once."""
+    folder, cache = tmp_path_factory.mktemp("ssp"), {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = export_ssp(systems(name), folder / f"{name}.ssp")
+        return cache[name]
+
+    return get
+
+
+@pytest.fixture(scope="module")
+def system(systems):
+    return systems("chess-pd")
+
+
+@pytest.fixture(scope="module")
+def ssp(packages):
+    return packages("chess-pd")
+
+
+@pytest.fixture(scope="module")
+def runs(systems, packages):
+    """runs(tool, h, name="chess-pd") -> Result, each computed once: 'gs', 'jacobi' (master),
+    'libcosim', 'fmpy'."""
+    cache = {}
+
+    def get(tool, h, name="chess-pd"):
+        if (name, tool, h) not in cache:
             if tool in ("gs", "jacobi"):
-                cache[tool, h] = Master(system).run(STOP, h, "gauss-seidel" if tool == "gs" else "jacobi")
+                cache[name, tool, h] = Master(systems(name)).run(STOP, h, "gauss-seidel" if tool == "gs" else "jacobi")
             elif tool == "libcosim":
                 pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
-                cache[tool, h] = run_ssp_libcosim(ssp, STOP, h)
+                cache[name, tool, h] = run_ssp_libcosim(packages(name), STOP, h)
             else:
-                cache[tool, h] = run_ssp_fmpy(ssp, STOP, h)
-        return cache[tool, h]
+                cache[name, tool, h] = run_ssp_fmpy(packages(name), STOP, h)
+        return cache[name, tool, h]
 
     return get
 
@@ -88,16 +126,16 @@ def runs(system, ssp):
 @pytest.fixture(scope="module")
 def loop_model():
     """Closed-loop error dynamics of the PD computed-torque loop: (omega_d, decay rate) in 1/s."""
-    g = load_spec("chess").gains("pd")
-    wn = math.sqrt(g["kp"])
-    zeta = g["kd"] / (2 * wn)
+    g = load_description("chess").gain_set("pd")
+    wn = math.sqrt(g.kp)
+    zeta = g.kd / (2 * wn)
     return wn * math.sqrt(1 - zeta * zeta), zeta * wn
 
 
 def kicks(gs, h):
     """Velocity kicks (rad/s, worst joint) of fmpy's two start-up steps: tau = 0 instead of
     tau_0, then tau = N(0, 0) instead of tau_0 (tau_0 = C(r_0, y_0), the consistent torque)."""
-    robot = Robot("chess")
+    robot = load_model("chess")
     q0, tau0, zero = gs.vector("plant.q")[0], gs.vector("controller.tau")[0], np.zeros(4)
     qdd = lambda tau: robot.forward_dynamics(q0, zero, tau)       # noqa: E731
     v_a = h * np.max(np.abs(qdd(tau0) - qdd(zero)))
@@ -114,20 +152,28 @@ def joint_diff(a, b, name="plant.q"):
 
 
 # -- the package ------------------------------------------------------------------------------------------
-def test_ssd_is_well_formed_with_components_connectors_and_connections(system, ssp):
+STOP_TIMES = {"chess-pd": 13.0, "rrp-line": 3.0, "rpp-bangbang": 2.0}       # s, the experiments' own
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_ssd_is_well_formed_with_components_connectors_and_connections(systems, packages, name):
+    system, ssp = systems(name), packages(name)
+    blocks = [b.name for b in system.blocks]
+    assert name != "chess-pd" or blocks == BLOCKS
+    description = load_description(system.extra["robot"])
     with zipfile.ZipFile(ssp) as zf:
         names = set(zf.namelist())
-    assert {"SystemStructure.ssd", "resources/controller.ssv"} | {f"resources/{b}.fmu" for b in BLOCKS} == names
+    assert {"SystemStructure.ssd", "resources/controller.ssv"} | {f"resources/{b}.fmu" for b in blocks} == names
 
     root = ET.fromstring(ssd_text(ssp))                                   # well-formed XML
     assert root.tag == f"{{{NS['ssd']}}}SystemStructureDescription"
-    assert (root.get("version"), root.get("name")) == ("1.0", "chess-pd")
+    assert (root.get("version"), root.get("name")) == ("1.0", name)
     components = root.findall("ssd:System/ssd:Elements/ssd:Component", NS)
-    assert [c.get("name") for c in components] == BLOCKS
-    assert [c.get("source") for c in components] == [f"resources/{b}.fmu" for b in BLOCKS]
+    assert [c.get("name") for c in components] == blocks
+    assert [c.get("source") for c in components] == [f"resources/{b}.fmu" for b in blocks]
 
     master = Master(system)
-    master.check()
+    assert master.check() == []                                           # every input wired
     for comp in components:
         md = master.nodes[comp.get("name")].md
         expected = {v.name: v for v in md.modelVariables if v.causality in ("input", "output")}  # all wired
@@ -137,45 +183,55 @@ def test_ssd_is_well_formed_with_components_connectors_and_connections(system, s
         for c in connectors:
             (typ,) = list(c)
             assert typ.tag == f"{{{NS['ssc']}}}{expected[c.get('name')].type}"
-    plant = components[3]
-    assert plant.find("ssd:Connectors/ssd:Connector[@name='grip']/ssc:Boolean", NS) is not None
-    assert plant.find("ssd:Connectors/ssd:Connector[@name='q[2]']/ssc:Real", NS).get("unit") == "rad"
+    plant = components[blocks.index("plant")]
+    if description.payload is not None:                                   # chess: the gripper
+        assert plant.find("ssd:Connectors/ssd:Connector[@name='grip']/ssc:Boolean", NS) is not None
+    unit = plant.find("ssd:Connectors/ssd:Connector[@name='q[2]']/ssc:Real", NS).get("unit")
+    assert unit == load_model(description).joint_units()[1] == {"chess-pd": "rad", "rrp-line": "rad",
+                                                                "rpp-bangbang": "m"}[name]
 
-    # every wire expanded to scalar variables: 3 x 3 + 3 x 4 + 2 x 4 + 4 + 2 = 35
+    # every wire expanded to scalar variables (chess: 3 x 3 + 3 x 4 + 2 x 4 + 4 + 2 = 35)
     connections = [(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
                    for c in root.findall("ssd:System/ssd:Connections/ssd:Connection", NS)]
-    assert len(connections) == 35 == len(set(connections))
-    assert ("ik", "q_ref[3]", "controller", "q_ref[3]") in connections
-    assert ("trajectory", "grip", "plant", "grip") in connections
+    assert len(connections) == CONNECTIONS[name] == len(set(connections)) == len(master.links)
+    reference = "ik" if "ik" in blocks else "trajectory"
+    assert (reference, "q_ref[3]", "controller", "q_ref[3]") in connections
+    if description.payload is not None:
+        assert ("trajectory", "grip", "plant", "grip") in connections
     ends = [(d, i) for _, _, d, i in connections]
     inputs = [(c.get("name"), con.get("name")) for c in components
               for con in c.findall("ssd:Connectors/ssd:Connector[@kind='input']", NS)]
     assert sorted(ends) == sorted(inputs)                                 # each input driven once
 
     experiment = root.find("ssd:DefaultExperiment", NS)
-    assert float(experiment.get("startTime")) == 0.0 and float(experiment.get("stopTime")) == 13.0
+    assert float(experiment.get("startTime")) == 0.0 and float(experiment.get("stopTime")) == STOP_TIMES[name]
     algo = experiment.find("ssd:Annotations/ssc:Annotation/osp:Algorithm/osp:FixedStepAlgorithm", NS)
     assert float(algo.get("baseStepSize")) == 1e-3
 
     # the controller's parameters, in an SSV file bound to it
-    binding = components[2].find("ssd:ParameterBindings/ssd:ParameterBinding", NS)
+    binding = components[blocks.index("controller")].find("ssd:ParameterBindings/ssd:ParameterBinding", NS)
     assert binding.get("source") == "resources/controller.ssv"
     with zipfile.ZipFile(ssp) as zf:
         ssv = ET.fromstring(zf.read("resources/controller.ssv"))
     values = {p.get("name"): float(p.find("ssv:Real", NS).get("value"))
               for p in ssv.findall("ssv:Parameters/ssv:Parameter", NS)}
-    spec = load_spec("chess")
-    assert values == {**spec.gains("pd"), "payload_mass": spec.payload_mass}
+    payload = {} if description.payload is None else {"payload_mass": description.payload.mass}
+    assert values == {**description.gain_set("pd").as_dict(), **payload}
+    if name == "chess-pd":
+        assert values == {"kp": 400.0, "kd": 20.0, "ki": 0.0, "payload_mass": 0.03}
 
 
-def test_ssd_and_ssv_validate_against_the_ssp_schemas(ssp, system, tmp_path):
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_ssd_and_ssv_validate_against_the_ssp_schemas(systems, packages, tmp_path, name):
     from fmpy.ssp.ssd import read_ssd
 
-    for path, external in ((ssp, True), (export_ssp(system, tmp_path / "inline.ssp", inline=True), False)):
+    system = systems(name)
+    blocks = [b.name for b in system.blocks]
+    for path, external in ((packages(name), True), (export_ssp(system, tmp_path / "inline.ssp", inline=True), False)):
         ssd = read_ssd(str(path), validate=True)       # SSP 1.0 XSDs (fmpy's copies); the .ssv too
-        assert [c.name for c in ssd.system.elements] == BLOCKS
-        assert len(ssd.system.connections) == 35
-        (binding,) = ssd.system.elements[2].parameterBindings
+        assert [c.name for c in ssd.system.elements] == blocks
+        assert len(ssd.system.connections) == CONNECTIONS[name]
+        (binding,) = ssd.system.elements[blocks.index("controller")].parameterBindings
         assert (binding.source is not None) == external
         (pset,) = binding.parameterValues
         assert {p.name: float(p.value) for p in pset.parameters}["kp"] == 400.0
@@ -187,14 +243,14 @@ def test_parameter_bindings_reach_the_fmus(fmu_dir, tmp_path):
     """fmpy.ssp parses the bindings but applies none itself; run_ssp_fmpy applies them. The PID
     gains and a vector parameter (plant q0) must show in both tools' results."""
     pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
-    robot = Robot("chess")
-    s = load_spec("chess").scenario
-    r0 = make_ik(robot).position(np.array(s["waypoints"][0]))
+    robot = load_model("chess")
+    s = load_description("chess").trajectory.parameters
+    r0 = make_solver(robot).position(np.array(s["waypoints"][0]))
     q0 = r0 + np.array([0.0, 0.05, -0.05, 0.02])
     system = load("chess-pid", fmu_dir=fmu_dir.parent)
     system.block("plant").parameters["q0"] = q0.tolist()
     path = export_ssp(system, tmp_path / "pid.ssp")
-    pid, pd = load_spec("chess").gains("pid"), load_spec("chess").gains("pd")
+    pid, pd = (load_description("chess").gain_set(g).as_dict() for g in ("pid", "pd"))
     h = 1e-3
 
     lc = run_ssp_libcosim(path, 0.01, h)
@@ -219,14 +275,15 @@ def test_parameter_bindings_reach_the_fmus(fmu_dir, tmp_path):
     np.testing.assert_allclose(fm.vector("controller.tau")[1], expected, rtol=0, atol=1e-9)
 
 
-def test_unwired_inputs_keep_their_start_values(fmu_dir, tmp_path):
+def test_unwired_inputs_keep_their_start_values(fmu_root, tmp_path, robot):
     """Only wired inputs become connectors: fmpy.ssp would wire an unconnected input connector to
-    the source of the input before it (or crash), and set it every step. A lone plant keeps its
-    start values (tau = 0, grip false) in both tools; an SSD with a loose input is refused."""
+    the source of the input before it (or crash), and set it every step. A lone plant (of every
+    robot) keeps its start values (tau = 0, grip false where it has one) in both tools; an SSD
+    with a loose input is refused."""
     pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
     from robofmu.system.diagram import BlockSpec, System
 
-    lone = System([BlockSpec("plant", "chess/plant.fmu")], [], fmu_dir=fmu_dir.parent, name="lone-plant",
+    lone = System([BlockSpec("plant", f"{robot}/plant.fmu")], [], fmu_dir=fmu_root, name="lone-plant",
                   stop_time=0.01)
     path = export_ssp(lone, tmp_path / "lone.ssp")
     root = ET.fromstring(ssd_text(path))
@@ -250,13 +307,28 @@ def test_unwired_inputs_keep_their_start_values(fmu_dir, tmp_path):
 
 # -- the algorithms ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("h", STEPS)
-def test_libcosim_reproduces_the_master_in_jacobi_mode(runs, h):
-    """Same exchange (tau_k = C(r_(k-2), y_(k-1))), same consistent start: equal to rounding
-    (libcosim counts time in integer nanoseconds, the master in k h)."""
-    lc, jac = runs("libcosim", h), runs("jacobi", h)
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_libcosim_reproduces_the_master_in_jacobi_mode(runs, systems, experiment, h):
+    """Same exchange (chess: tau_k = C(r_(k-2), y_(k-1)); one step per feedthrough block in
+    every diagram), same consistent start: equal to rounding (libcosim counts time in integer
+    nanoseconds, the master in k h). Every Real output libcosim records is compared, to 1e-12
+    of its own range (at least 1 unit): the times differ by an ulp, the trajectories by 1-3
+    ulp, the states by < 3e-14; the torque tau = M(q) (qdd_ref + kd de + kp e) + N multiplies
+    such rounding by M (kp, kd): rpp's M_11 = 22 kg m^2 (chess: ~0.08) gives it torques of up
+    to 100 N.m that agree to 1.5e-11 N.m (1.5e-13 of the range)."""
+    lc, jac = runs("libcosim", h, experiment), runs("jacobi", h, experiment)
     np.testing.assert_allclose(lc.time, jac.time, rtol=0, atol=1e-12)
-    for name in ("plant.q", "plant.qd", "controller.tau", "ik.q_ref"):
+    real = [c for c in jac.columns if not c.endswith(("grip", "reachable"))]     # the Booleans
+    assert sorted(lc.columns) == sorted(real)
+    vectors = ["plant.q", "plant.qd", "controller.tau", dict(systems(experiment).extra["roles"])["q_ref"]]
+    assert all(f"{v}[1]" in lc.columns for v in vectors)
+    for name in lc.columns:
+        scale = max(1.0, np.max(np.abs(jac[name])))
+        np.testing.assert_allclose(lc[name], jac[name], rtol=0, atol=1e-12 * scale, err_msg=name)
+    for name in ("plant.q", "plant.qd") + (("controller.tau", "ik.q_ref") if experiment == "chess-pd" else ()):
         np.testing.assert_allclose(lc.vector(name), jac.vector(name), rtol=0, atol=1e-12, err_msg=name)
+    # and the comparison is not vacuous: the master's Gauss-Seidel run is another run
+    assert np.max(np.abs(runs("gs", h, experiment).vector("plant.q") - jac.vector("plant.q"))) > 1e-7
 
 
 def test_libcosim_against_gauss_seidel_differs_by_its_delays(runs):

@@ -3,7 +3,8 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
-FMU_SOURCES := $(shell find components -name '*.py' -o -name '*.urdf' -o -name '*.toml') system/build.py
+FMU_SOURCES := $(shell find components -name '*.py' -o -name '*.urdf' -o -name '*.toml') system/build.py \
+               $(wildcard system/fmi_export/*.py system/fmi_export/*.c)
 FMU_STAMP := fmus/.built
 
 .PHONY: venv fmus test demo bench clean

@@ -1,0 +1,184 @@
+"""robofmu's FMI 2.0 export library, and putting it into the FMUs pythonfmu builds.
+
+pythonfmu 0.7.0's export library (the C++ that turns FMI calls into calls of the Python slave)
+decides three things in ways the FMI 2.0 standard does not mean:
+
+- a step the slave refuses (``do_step`` returns False) is always fmi2Discard, with the
+  instance marked as wanting to terminate, so fmpy's ``simulate_fmu`` ends the run early
+  without an error; no other call can fail except by raising, which is fmi2Fatal;
+- while the importer's loggingOn is false, no message reaches its logger, errors included.
+
+(Its exception path, fmi2Fatal after releasing the instance's Python objects once too often,
+stays as it is: robofmu's slave lets no exception reach it and fails calls as below instead.)
+
+The PyPI release of pythonfmu 0.7.0 carries that library only compiled (its sdist has no C++
+sources), so robofmu does not rebuild it: it puts a small library of its own in front of it,
+compiled here from ``robofmu_fmi2.c`` with the machine's C compiler (once per source and
+compiler, cached). Each FMU's ``binaries/linux64/<modelIdentifier>.so`` becomes that library;
+pythonfmu's, unchanged, moves beside it as ``libpythonfmu-export.so``. The C source's header
+comment says exactly what it changes; in short:
+
+- a message the slave logs with the category :data:`STATUS_CATEGORY` makes the current FMI
+  call return at least that message's status (the importer gets the message with pythonfmu's
+  usual category, ``logStatusError`` ...);
+- messages of status warning and above always reach the importer's logger, OK messages only
+  with loggingOn (and its categories, if set).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree
+
+__all__ = ["STATUS_CATEGORY", "STOCK_LIBRARY", "FmiExportError", "library", "install", "installed"]
+
+SOURCE = Path(__file__).resolve().parent / "robofmu_fmi2.c"
+#: A message logged with this category sets the status of the FMI call it is logged in.
+STATUS_CATEGORY = "robofmu:status"
+#: pythonfmu's export library, beside robofmu's in ``binaries/linux64``.
+STOCK_LIBRARY = "libpythonfmu-export.so"
+PLATFORM = "linux64"
+_FLAGS = ["-shared", "-fPIC", "-O2", "-Wall", "-fvisibility=hidden"]
+_LIBS = ["-ldl"]
+
+
+class FmiExportError(RuntimeError):
+    """robofmu's export library cannot be built or put into a FMU."""
+
+
+def forwarded_functions() -> list[str]:
+    """The FMI functions robofmu's library takes from pythonfmu's (the C source's list)."""
+    names = re.findall(r"^\s*X\([^,]+,\s*(fmi2\w+)\s*,", SOURCE.read_text(), flags=re.M)
+    if not names:
+        raise FmiExportError(f"{SOURCE}: no forwarded FMI functions found")
+    return names
+
+
+def _compiler() -> list[str]:
+    if os.environ.get("CC"):
+        return shlex.split(os.environ["CC"])
+    for name in ("cc", "gcc", "clang"):
+        path = shutil.which(name)
+        if path:
+            return [path]
+    raise FmiExportError(
+        f"robofmu build: no C compiler found ($CC, cc, gcc, clang). The FMUs need robofmu's FMI "
+        f"export library, compiled from {SOURCE}; install one (Debian: apt-get install gcc) or set CC.")
+
+
+def _cache_dir() -> Path:
+    for candidate in (os.environ.get("ROBOFMU_CACHE"),
+                      Path(sys.prefix) / "share" / "robofmu",
+                      Path(tempfile.gettempdir()) / f"robofmu-cache-{os.getuid()}"):
+        if not candidate:
+            continue
+        folder = Path(candidate) / "fmi-export"
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            probe = folder / f".probe-{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+            return folder
+        except OSError:
+            continue
+    raise FmiExportError("robofmu build: no writable folder for the compiled FMI export library")
+
+
+def library(log=None) -> Path:
+    """robofmu's export library for ``binaries/linux64``, compiled if not cached yet.
+
+    Raises :class:`FmiExportError` (with the compiler's output) if it cannot be compiled.
+    """
+    if not (sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64")):
+        raise FmiExportError(f"robofmu build: the FMUs are built on Linux x86_64 (binaries/{PLATFORM}); "
+                             f"this is {sys.platform} {platform.machine()}")
+    cc = _compiler()
+    try:
+        version = subprocess.run(cc + ["--version"], capture_output=True, text=True, timeout=60).stdout
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise FmiExportError(f"robofmu build: the C compiler {shlex.join(cc)} does not run: {exc}") from None
+    source = SOURCE.read_bytes()
+    key = hashlib.sha256(b"\0".join([source, shlex.join(cc + _FLAGS + _LIBS).encode(), version.encode()]))
+    target = _cache_dir() / key.hexdigest()[:16] / "robofmu_fmi2.so"
+    if target.is_file():
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    partial = target.with_name(f".{target.name}.{os.getpid()}")
+    command = cc + _FLAGS + ["-o", str(partial), str(SOURCE)] + _LIBS
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise FmiExportError(f"robofmu build: compiling the FMI export library failed: {exc}\n"
+                             f"  {shlex.join(command)}") from None
+    if done.returncode != 0 or not partial.is_file():
+        partial.unlink(missing_ok=True)
+        raise FmiExportError(
+            f"robofmu build: compiling the FMI export library failed (exit status {done.returncode}):\n"
+            f"  {shlex.join(command)}\n{done.stderr.strip() or done.stdout.strip()}")
+    os.replace(partial, target)
+    if log is not None:
+        log(f"compiled robofmu's FMI export library: {target}")
+    return target
+
+
+def _model_identifier(fmu: zipfile.ZipFile, path: Path) -> str:
+    root = ElementTree.fromstring(fmu.read("modelDescription.xml"))
+    node = root.find("CoSimulation")
+    if node is None or not node.get("modelIdentifier"):
+        raise FmiExportError(f"{path}: modelDescription.xml names no co-simulation model identifier")
+    return node.get("modelIdentifier")
+
+
+def installed(fmu: str | Path) -> bool:
+    """Whether ``fmu`` carries robofmu's export library in front of pythonfmu's."""
+    with zipfile.ZipFile(fmu) as z:
+        return f"binaries/{PLATFORM}/{STOCK_LIBRARY}" in z.namelist()
+
+
+def install(fmu: str | Path, ours: Path | None = None) -> None:
+    """Put robofmu's export library into a FMU pythonfmu has just built (in place).
+
+    ``binaries/linux64/<modelIdentifier>.so`` (pythonfmu's library, renamed by its builder)
+    moves to ``binaries/linux64/libpythonfmu-export.so``; robofmu's library takes its name.
+    """
+    path = Path(fmu)
+    ours = library() if ours is None else Path(ours)
+    with zipfile.ZipFile(path) as z:
+        identifier = _model_identifier(z, path)
+        entry = f"binaries/{PLATFORM}/{identifier}.so"
+        stock_entry = f"binaries/{PLATFORM}/{STOCK_LIBRARY}"
+        names = z.namelist()
+        if stock_entry in names:
+            raise FmiExportError(f"{path}: robofmu's export library is already in it")
+        if entry not in names:
+            raise FmiExportError(f"{path}: no {entry}: pythonfmu's builder did not put its library in")
+        stock = z.read(entry)
+        missing = [name for name in forwarded_functions() if name.encode() + b"\0" not in stock]
+        if missing:
+            raise FmiExportError(f"{path}: pythonfmu's export library lacks {', '.join(missing)}; robofmu's "
+                                 "export library (system/fmi_export) was written for pythonfmu 0.7.0")
+        entries = [(info, z.read(info.filename)) for info in z.infolist()]
+    partial = path.with_name(f".{path.name}.{os.getpid()}.partial")
+    try:
+        with zipfile.ZipFile(partial, "w") as out:
+            for info, data in entries:
+                if info.filename == entry:
+                    out.writestr(info, ours.read_bytes())
+                    moved = zipfile.ZipInfo(stock_entry, date_time=info.date_time)
+                    moved.compress_type = info.compress_type
+                    moved.external_attr = info.external_attr
+                    out.writestr(moved, stock)
+                else:
+                    out.writestr(info, data)
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)

@@ -1,24 +1,66 @@
-"""The ``robofmu`` command line."""
+"""The ``robofmu`` command line.
+
+Exit status and messages, for every command:
+
+- **2**: a mistake in what was asked (an unknown experiment or robot, an experiment file that
+  cannot be used, a bad option value, an FMU folder that is missing or stale, an output path
+  that cannot be written), found before anything runs; one line ``robofmu <command>: ...``
+  naming the file, key or option, never a traceback. argparse's own errors (an unknown
+  option, a value that is no number) also exit 2, after a usage line.
+- **1**: the work itself failed (a co-simulation step, an FMU that fails to initialize; for
+  ``doctor``: a problem found), one line per failure.
+- **130**: interrupted (Ctrl-C). ``robofmu run`` stops at the next communication point, frees
+  the FMUs and writes what was recorded so far.
+"""
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
 
+#: ``robofmu step``'s one-line help; its parser (and python-control, which it imports) is only
+#: loaded when the command is ``step``.
+STEP_HELP = "co-simulate a joint reference step and compare it with linear predictions"
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line (a DiagramError's problems joined by '; ')."""
+    problems = getattr(exc, "problems", None)
+    if problems:
+        head = str(exc).split("\n", 1)[0]
+        return " ".join(f"{head} {'; '.join(problems)}".split())
+    return " ".join(str(exc).split())
+
+
+def _say(command: str, exc_or_text) -> None:
+    text = exc_or_text if isinstance(exc_or_text, str) else _one_line(exc_or_text)
+    print(f"robofmu {command}: {text}", file=sys.stderr)
+
 
 def _build(args) -> int:
     from robofmu.components.robots import available
+    from robofmu.system.runner import UsageError, check_writable
+
+    known = available()
+    unknown = [robot for robot in args.robots if robot not in known]
+    if unknown:
+        _say("build", f"unknown robot {unknown[0]!r}; described robots: {', '.join(known)}")
+        return 2
+    try:
+        check_writable(args.out, "--out")
+    except UsageError as exc:
+        _say("build", exc)
+        return 2
     from robofmu.system.build import build
     from robofmu.system.validate import problems_of
 
-    robots = args.robots or available()
     status = 0
-    for robot in robots:
+    for robot in args.robots or known:
         try:
             paths = build(robot, args.out)
-        except ValueError as exc:
-            print(f"robofmu build: {exc}", file=sys.stderr)
-            return 2
+        except (ValueError, OSError) as exc:
+            _say("build", f"{robot}: {_one_line(exc)}")
+            return 1
         for path in paths:
             problems = problems_of(path)
             for p in problems:
@@ -27,20 +69,28 @@ def _build(args) -> int:
     return status
 
 
+def _default_out(experiment: str) -> Path:
+    name = Path(experiment).stem if experiment.endswith(".toml") else experiment
+    return Path("results") / name
+
+
 def _run(args) -> int:
-    from robofmu.system.master import DiagramError, SimulationError
+    from robofmu.system.master import Interrupted, SimulationError
     from robofmu.system.runner import run_experiment
 
-    out = Path(args.out or Path("results") / args.experiment)
+    out = Path(args.out) if args.out else _default_out(args.experiment)
     try:
         run = run_experiment(args.experiment, out, fmu_dir=args.fmus, step=args.step,
                              stop_time=args.stop, algorithm=args.algorithm)
-    except (ValueError, DiagramError) as exc:
-        print(f"robofmu run: {exc}", file=sys.stderr)
-        return 2
+    except Interrupted as exc:
+        _say("run", exc)
+        return 130
     except SimulationError as exc:
-        print(f"robofmu run: {exc}", file=sys.stderr)
+        _say("run", exc)
         return 1
+    except ValueError as exc:          # UsageError, ExperimentError, DiagramError
+        _say("run", exc)
+        return 2
     print(run.section)
     print(f"\nwrote {out / 'results.csv'}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
     return 0
@@ -48,29 +98,60 @@ def _run(args) -> int:
 
 def _ssp(args) -> int:
     from robofmu.system.experiment import load
-    from robofmu.system.master import DiagramError
+    from robofmu.system.runner import check_fmu_folder, check_writable
     from robofmu.system.ssp import export_ssp
 
     try:
         system = load(args.experiment, fmu_dir=args.fmus)
         out = Path(args.out or f"{system.name}.ssp")
-        print(export_ssp(system, out, inline=args.inline))
-    except (ValueError, DiagramError) as exc:
-        print(f"robofmu ssp: {exc}", file=sys.stderr)
+        check_writable(out, "--out" if args.out else "the default output", file=True)
+        check_fmu_folder(system)
+        written = export_ssp(system, out, inline=args.inline)
+    except ValueError as exc:          # UsageError, ExperimentError, DiagramError
+        _say("ssp", exc)
         return 2
+    except OSError as exc:
+        _say("ssp", f"cannot write {out}: {exc.strerror or exc}")
+        return 1
+    print(written)
     return 0
 
 
 def _demo(args) -> int:
     from robofmu.system.demo import demo
+    from robofmu.system.master import Interrupted, SimulationError
 
-    return demo(Path(args.out), fmu_dir=args.fmus, quick=args.quick)
+    try:
+        return demo(Path(args.out), fmu_dir=args.fmus, quick=args.quick)
+    except Interrupted as exc:
+        _say("demo", f"{_one_line(exc)}; {args.out} left as it was")
+        return 130
+    except SimulationError as exc:
+        _say("demo", exc)
+        return 1
+    except ValueError as exc:          # UsageError, ExperimentError, DiagramError
+        _say("demo", exc)
+        return 2
 
 
-def main(argv: list[str] | None = None) -> int:
+def _doctor(args) -> int:
+    from robofmu.system.doctor import doctor
+
+    return doctor(Path(args.fmus))
+
+
+def _command(argv: list[str]) -> str | None:
+    """The sub-command in ``argv``: its first argument that is not an option."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def parser_for(argv: list[str]) -> argparse.ArgumentParser:
+    """The argument parser (``robofmu step``'s own only when ``argv`` asks for it)."""
     parser = argparse.ArgumentParser(
         prog="robofmu",
-        description="Robot-arm control blocks as FMI 2.0 co-simulation FMUs, and their co-simulation.")
+        description="Robot-arm control blocks as FMI 2.0 co-simulation FMUs, and their co-simulation. "
+                    "A mistake is answered in one line naming the file, key or option (exit status 2), "
+                    "a failed run with status 1, Ctrl-C with 130.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
@@ -85,11 +166,18 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("run", help="run a named co-simulation experiment",
                        description="Run a co-simulation experiment and write DIR/results.csv (time, then "
                                    "one column per signal 'instance.variable'), figures and report.md. "
+                                   "DIR is replaced whole at the end of the run (written in a temporary "
+                                   "sibling folder, then swapped in), so no earlier output stays beside "
+                                   "new results; a folder holding other files than a run's outputs is "
+                                   "refused. Ctrl-C stops at the next communication point and writes the "
+                                   "results so far (exit status 130). An experiment file may name a "
+                                   "packaged experiment as its base. "
                                    f"Experiments: {', '.join(experiments())}.")
     p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
-    p.add_argument("--out", metavar="DIR", help="output folder (default: results/EXPERIMENT)")
+    p.add_argument("--out", metavar="DIR", help="output folder, replaced whole (default: results/EXPERIMENT)")
     p.add_argument("--step", type=float, metavar="H", help="communication step in s (default: the experiment's)")
-    p.add_argument("--stop", type=float, metavar="T", help="stop time in s (default: the experiment's)")
+    p.add_argument("--stop", type=float, metavar="T", help="stop time in s, a whole number of steps "
+                                                           "(default: the experiment's)")
     p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"], help="master algorithm")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.set_defaults(func=_run)
@@ -103,20 +191,48 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--inline", action="store_true", help="parameter sets inline in the SSD, not .ssv files")
     p.set_defaults(func=_ssp)
 
-    from robofmu.system.stepresponse import add_step_command
-    add_step_command(sub)
+    if _command(argv) == "step":
+        from robofmu.system.stepresponse import add_step_command
+        add_step_command(sub)
+    else:
+        sub.add_parser("step", help=STEP_HELP)
 
     p = sub.add_parser("demo", help="the flagship studies of every robot: experiments, figures and a report",
                        description="Run the studies of system/studies/demo.toml (one section per source "
                                    "document), the accuracy study against a monolithic reference and the "
-                                   "step responses; write figures and DIR/report.md (DIR is replaced).")
+                                   "step responses; write figures and DIR/report.md. DIR is replaced whole "
+                                   "once the studies are done (written in a temporary sibling folder); a "
+                                   "folder that is not an earlier demo's is refused.")
     p.add_argument("--out", default="results", metavar="DIR", help="output folder (default: results)")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.add_argument("--quick", action="store_true", help="shorter accuracy study")
     p.set_defaults(func=_demo)
 
-    args = parser.parse_args(argv)
-    return args.func(args)
+    p = sub.add_parser("doctor", help="what a process needs to run the FMUs, and whether it works here",
+                       description="Tell what an importing process needs to run the FMUs: the Python "
+                                   "interpreter they were built for (path, version), the libpython a "
+                                   "non-Python host (e.g. libcosim's cosim) must preload, the venv's bin "
+                                   "to put on PATH, and the packages the FMUs import (from robofmu's "
+                                   "requirements); print the exact `export` lines. Then check: each package "
+                                   "importable (with its version), every described robot's FMUs present under "
+                                   "--fmus and built from these robofmu sources (their vendor annotation's "
+                                   "source hash), one FMU instantiated and stepped through fmpy in a fresh "
+                                   "process. Exit status 0 when everything checks, 1 otherwise (one line "
+                                   "per problem).")
+    p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder to check (default: fmus)")
+    p.set_defaults(func=_doctor)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``robofmu`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = parser_for(argv).parse_args(argv)
+        return args.func(args)
+    except KeyboardInterrupt:
+        print(f"robofmu{' ' + _command(argv) if _command(argv) else ''}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -26,11 +26,49 @@ def expand(names, base: str) -> list[str]:
     return [n for _, n in found]
 
 
+def matching(columns: list[str], entry: str) -> list[int]:
+    """Indices of the ``columns`` (``instance.variable``) one record entry names.
+
+    Parameters
+    ----------
+    columns : list of str
+    entry : str
+        An exact column (``plant.q[2]``), a vector base (``plant.q``: ``plant.q[1]`` ..
+        ``plant.q[n]``) or an fnmatch pattern (``plant.*``, ``*.tau[[]*``); tried in that order,
+        so an exact name with brackets is not read as a pattern's character class.
+
+    Returns
+    -------
+    list of int
+        In column order; [] if the entry names nothing.
+    """
+    index = {column: k for k, column in enumerate(columns)}
+    if entry in index:
+        return [index[entry]]
+    members = expand(columns, entry)
+    if members:
+        return sorted(index[m] for m in members)
+    return [k for k, c in enumerate(columns) if fnmatch.fnmatchcase(c, entry)]
+
+
 def select(columns: list[str], patterns: list[str] | None) -> list[int]:
-    """Indices of the ``columns`` (``instance.variable``) matching any fnmatch pattern; all if None."""
+    """Indices of the ``columns`` (``instance.variable``) any entry names (:func:`matching`:
+    exact names, vector bases, fnmatch patterns), in column order; all if None."""
     if patterns is None:
         return list(range(len(columns)))
-    return [k for k, c in enumerate(columns) if any(fnmatch.fnmatchcase(c, p) for p in patterns)]
+    if isinstance(patterns, str):
+        patterns = [patterns]
+    chosen = {k for entry in patterns for k in matching(columns, entry)}
+    return sorted(chosen)
+
+
+def unmatched(columns: list[str], patterns: list[str] | None) -> list[str]:
+    """The entries of ``patterns`` that name none of the ``columns`` ([] for None)."""
+    if patterns is None:
+        return []
+    if isinstance(patterns, str):
+        patterns = [patterns]
+    return [entry for entry in patterns if not matching(columns, entry)]
 
 
 def spread(names: list[str], value, what: str) -> list:
@@ -150,6 +188,10 @@ class System:
     stop_time, step : float
         Default run length and communication step (s).
     algorithm : {"gauss-seidel", "jacobi"}
+    extra : dict
+        The experiment's other keys (``robot``, ``roles``).
+    source : Path or None
+        The experiment file the system was read from (None: built in Python).
     """
 
     blocks: list[BlockSpec]
@@ -161,6 +203,7 @@ class System:
     step: float = 1e-3
     algorithm: str = "gauss-seidel"
     extra: dict = field(default_factory=dict)
+    source: Path | None = None
 
     def __post_init__(self):
         self.wires = [Wire.parse(w) if isinstance(w, str) else w for w in self.wires]
@@ -184,7 +227,14 @@ class System:
     def from_dict(cls, data: dict, fmu_dir: str | Path | None = None) -> "System":
         """Build from the structure of an experiment file (see ``system/experiments/``)."""
         known = {"name", "description", "stop_time", "step", "algorithm", "blocks", "connections", "fmu_dir"}
-        blocks = [BlockSpec(b["name"], b["fmu"], dict(b.get("parameters", {}))) for b in data["blocks"]]
+        if not isinstance(data.get("blocks"), list):
+            raise ValueError("blocks: missing (an array of tables with `name` and `fmu`)")
+        blocks = []
+        for k, b in enumerate(data["blocks"], 1):
+            missing = [key for key in ("name", "fmu") if not isinstance(b, dict) or key not in b]
+            if missing:
+                raise ValueError(f"blocks[{k}]: missing key {missing[0]!r}")
+            blocks.append(BlockSpec(b["name"], b["fmu"], dict(b.get("parameters", {}))))
         return cls(blocks=blocks, wires=list(data.get("connections", [])),
                    fmu_dir=Path(fmu_dir if fmu_dir is not None else data.get("fmu_dir", "fmus")),
                    name=data.get("name", "system"), description=data.get("description", ""),
@@ -199,6 +249,11 @@ class System:
         try:
             data = tomllib.loads(path.read_text())
         except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: invalid TOML: {exc}") from None
+        try:
+            system = cls.from_dict(data, fmu_dir)
+        except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from None
-        return cls.from_dict(data, fmu_dir)
+        system.source = path
+        return system
 

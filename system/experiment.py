@@ -2,23 +2,32 @@
 
 An experiment file either describes a whole diagram (blocks, connections, timing, the robot and
 the signal roles) or names a ``base`` diagram and sets block parameters
-(``[parameters.<block>]``). A string parameter value ``"robot:gains.pid.kp"`` is read from the
-robot's typed description (``gains.pid.kp``, ``payload.mass``, ``configurations.home``), so
-the seed's gains and the pawn's mass live in one place.
+(``[parameters.<block>]``). A base is looked for beside the file first, then among the packaged
+experiments, so a user's file anywhere can build on a packaged diagram; a base may have a base
+of its own. A string parameter value ``"robot:gains.pid.kp"`` is read from the robot's typed
+description (``gains.pid.kp``, ``payload.mass``, ``configurations.home``), so the seed's gains
+and the pawn's mass live in one place.
 
 ``[roles]`` names the signals analysis and plots need, by what they mean: ``q`` (measured joint
 positions), ``q_ref`` (joint reference), ``tau`` (joint efforts), and where the diagram has them
 ``x_ref`` (task reference) and ``grip`` (gripper). Nothing else in ``system/`` knows instance
 names.
+
+A file that cannot be used is refused with an :class:`ExperimentError` (a ValueError) in one
+line naming the file and the key: a TOML syntax error (with its line), a missing ``name``,
+``blocks`` or block ``name`` / ``fmu``, a value of the wrong type, an unknown key, a base that
+does not exist.
 """
 from __future__ import annotations
 
+import difflib
+import math
 import tomllib
 from pathlib import Path
 
 from robofmu.components.robots import load_description
 
-from .diagram import System
+from .diagram import System, Wire
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 
@@ -28,24 +37,230 @@ ROLES = {"q": "measured joint positions", "qd": "measured joint velocities",
          "q_ref": "joint position reference", "tau": "joint efforts",
          "x_ref": "task-space reference", "grip": "gripper closed"}
 
+#: Top-level keys of an experiment file, and what each must hold.
+KEYS = {"name": "a string (the experiment's name)",
+        "description": "a string",
+        "robot": "a string (a described robot)",
+        "stop_time": "a time in s > 0",
+        "step": "a communication step in s > 0",
+        "algorithm": "'gauss-seidel' or 'jacobi'",
+        "blocks": "an array of [[blocks]] tables (name, fmu, parameters)",
+        "connections": "an array of strings 'block.variable -> block.variable'",
+        "roles": "a table of role = 'block.variable'",
+        "fmu_dir": "a string (folder of the FMUs)",
+        "abstract": "true or false (a base only, not listed as runnable)",
+        "base": "a string (the name of the experiment this one builds on)",
+        "parameters": "a table of [parameters.<block>] tables"}
+
+#: Keys of one ``[[blocks]]`` table.
+BLOCK_KEYS = {"name": "the instance name, a string",
+              "fmu": "the FMU file relative to the FMU folder, a string",
+              "parameters": "a table of parameter = value"}
+
+
+class ExperimentError(ValueError):
+    """An experiment file that cannot be used; the message is one line naming the file and key.
+
+    Attributes
+    ----------
+    path : Path or None
+        The file (None: an unknown experiment name).
+    key : str or None
+        The key at fault (``"blocks[2].fmu"``), where there is one.
+    """
+
+    def __init__(self, path: Path | None, key: str | None, message: str):
+        where = [str(path)] if path is not None else []
+        where += [key] if key else []
+        super().__init__(": ".join(where + [message]))
+        self.path = path
+        self.key = key
+
+
+def _is_base(path: Path) -> bool:
+    try:
+        return bool(tomllib.loads(path.read_text()).get("abstract", False))
+    except (OSError, ValueError):
+        return False
+
 
 def available() -> list[str]:
     """Names of the runnable experiments (bases that only hold a diagram are excluded)."""
-    names = []
-    for p in sorted(EXPERIMENTS_DIR.glob("*.toml")):
-        if not tomllib.loads(p.read_text()).get("abstract", False):
-            names.append(p.stem)
-    return names
+    return [p.stem for p in sorted(EXPERIMENTS_DIR.glob("*.toml")) if not _is_base(p)]
 
 
 def _path(name_or_path: str | Path) -> Path:
+    """The file of an experiment given by name (packaged) or path; ExperimentError if none."""
     p = Path(name_or_path)
-    if p.suffix == ".toml" and p.is_file():
-        return p
-    candidate = EXPERIMENTS_DIR / f"{name_or_path}.toml"
+    text = str(name_or_path)
+    if p.suffix == ".toml" or "/" in text or "\\" in text:
+        if p.is_file():
+            return p
+        if p.is_dir():
+            raise ExperimentError(p, None, "is a folder, not an experiment file")
+        if p.name == text and (EXPERIMENTS_DIR / p.name).is_file():
+            return EXPERIMENTS_DIR / p.name          # `chess-pd.toml` for the packaged `chess-pd`
+        raise ExperimentError(p, None, "no such experiment file")
+    candidate = EXPERIMENTS_DIR / f"{text}.toml"
     if candidate.is_file():
         return candidate
-    raise ValueError(f"unknown experiment {str(name_or_path)!r}; available: {', '.join(available())}")
+    raise ExperimentError(None, None, f"unknown experiment {text!r}; available: {', '.join(available())}")
+
+
+def _read(path: Path) -> dict:
+    """The TOML table of ``path``; ExperimentError naming the file (and the line) otherwise."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ExperimentError(path, None, f"not UTF-8 text (byte {exc.start})") from None
+    except OSError as exc:
+        raise ExperimentError(path, None, f"cannot read it: {exc.strerror or exc}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        if "(at end of document)" in message:
+            message = message.replace("(at end of document)",
+                                      f"(at line {max(1, text.count(chr(10)) + 1)}, the end of the file)")
+        raise ExperimentError(path, None, f"invalid TOML: {message}") from None
+
+
+def _kind(value) -> str:
+    """What a TOML value is, for messages."""
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "an array",
+            dict: "a table"}.get(type(value), type(value).__name__)
+
+
+def _wrong(path: Path, key: str, expected: str, value) -> ExperimentError:
+    return ExperimentError(path, key, f"must be {expected}, got {value!r} ({_kind(value)})"
+                           if not isinstance(value, (dict, list)) else f"must be {expected}, got {_kind(value)}")
+
+
+def _unknown(path: Path, key: str, known, where: str = "") -> ExperimentError:
+    close = difflib.get_close_matches(key, list(known), n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(known)})"
+    return ExperimentError(path, f"{where}{key}", f"unknown key{hint}")
+
+
+def _check_file(path: Path, data: dict) -> None:
+    """Keys and types of one experiment file as written (before its base is merged)."""
+    for key in data:
+        if key not in KEYS:
+            raise _unknown(path, key, KEYS)
+    if "name" not in data:
+        raise ExperimentError(path, "name", "missing key: every experiment file names its experiment "
+                                            "(name = \"...\")")
+    for key in ("name", "description", "robot", "fmu_dir", "base"):
+        if key in data and not (isinstance(data[key], str) and (data[key].strip() or key == "description")):
+            raise _wrong(path, key, "a non-empty string" if key != "description" else "a string", data[key])
+    for key in ("stop_time", "step"):
+        if key in data:
+            value = data[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or value <= 0:
+                raise _wrong(path, key, KEYS[key], value)
+    if "algorithm" in data and data["algorithm"] not in ("gauss-seidel", "jacobi"):
+        raise _wrong(path, "algorithm", KEYS["algorithm"], data["algorithm"])
+    if "abstract" in data and not isinstance(data["abstract"], bool):
+        raise _wrong(path, "abstract", KEYS["abstract"], data["abstract"])
+    if "blocks" in data:
+        if "base" in data:
+            raise ExperimentError(path, "blocks", "a file with a `base` takes the base's blocks; set their "
+                                                  "parameters in [parameters.<block>] tables")
+        blocks = data["blocks"]
+        if not isinstance(blocks, list) or not blocks:
+            raise _wrong(path, "blocks", KEYS["blocks"] + ", at least one", blocks)
+        names = set()
+        for k, block in enumerate(blocks, 1):
+            where = f"blocks[{k}]"
+            if not isinstance(block, dict):
+                raise _wrong(path, where, "a [[blocks]] table", block)
+            for key in block:
+                if key not in BLOCK_KEYS:
+                    raise _unknown(path, key, BLOCK_KEYS, where=f"{where}.")
+            for key in ("name", "fmu"):
+                if key not in block:
+                    label = f" ({block['name']!r})" if isinstance(block.get("name"), str) else ""
+                    raise ExperimentError(path, f"{where}.{key}", f"missing key in block {k}{label}: "
+                                                                  f"{key}, {BLOCK_KEYS[key]}")
+                if not isinstance(block[key], str) or not block[key].strip():
+                    raise _wrong(path, f"{where}.{key}", "a non-empty string", block[key])
+            if block["name"] in names:
+                raise ExperimentError(path, f"{where}.name", f"instance name {block['name']!r} is used twice")
+            names.add(block["name"])
+            if "parameters" in block and not isinstance(block["parameters"], dict):
+                raise _wrong(path, f"{where}.parameters", BLOCK_KEYS["parameters"], block["parameters"])
+    if "connections" in data:
+        wires = data["connections"]
+        if not isinstance(wires, list):
+            raise _wrong(path, "connections", KEYS["connections"], wires)
+        for k, wire in enumerate(wires, 1):
+            if not isinstance(wire, str):
+                raise _wrong(path, f"connections[{k}]", "a string 'block.variable -> block.variable'", wire)
+            try:
+                Wire.parse(wire)
+            except ValueError as exc:
+                raise ExperimentError(path, f"connections[{k}]", str(exc)) from None
+    if "roles" in data:
+        roles = data["roles"]
+        if not isinstance(roles, dict):
+            raise _wrong(path, "roles", KEYS["roles"], roles)
+        for role, signal in roles.items():
+            if role not in ROLES:
+                raise ExperimentError(path, "roles", f"unknown role {role!r} (known: {', '.join(ROLES)})")
+            if not isinstance(signal, str) or "." not in signal:
+                raise _wrong(path, f"roles.{role}", "a string 'block.variable'", signal)
+    if "parameters" in data:
+        if "base" not in data:
+            raise ExperimentError(path, "parameters", "[parameters.<block>] tables need a `base`; without one, "
+                                                      "set a block's parameters in its [[blocks]] table")
+        tables = data["parameters"]
+        if not isinstance(tables, dict):
+            raise _wrong(path, "parameters", KEYS["parameters"], tables)
+        for block, values in tables.items():
+            if not isinstance(values, dict):
+                raise _wrong(path, f"parameters.{block}", "a table of parameter = value", values)
+
+
+def _base_path(path: Path, base: str) -> Path:
+    """The file of ``base`` named in ``path``: beside it, else among the packaged experiments."""
+    name = base[:-len(".toml")] if base.endswith(".toml") else base
+    for folder in (path.parent, EXPERIMENTS_DIR):
+        candidate = folder / f"{name}.toml"
+        if candidate.is_file():
+            return candidate
+    bases = sorted(p.stem for p in EXPERIMENTS_DIR.glob("*.toml"))
+    raise ExperimentError(path, "base", f"no experiment {base!r}: neither {path.parent / (name + '.toml')} "
+                                        f"nor a packaged one (packaged: {', '.join(bases)})")
+
+
+def _merged(path: Path, seen: tuple[Path, ...] = ()) -> dict:
+    """The checked content of ``path`` with its base (recursively) merged in."""
+    if path.resolve() in seen:
+        chain = " -> ".join(p.stem for p in (*seen, path.resolve()))
+        raise ExperimentError(path, "base", f"the bases form a cycle: {chain}")
+    data = _read(path)
+    _check_file(path, data)
+    if "base" in data:
+        base = _merged(_base_path(path, data["base"]), (*seen, path.resolve()))
+        overrides = data.pop("parameters", {})
+        data.pop("base")
+        merged = {**base, **data}
+        blocks = [dict(b, parameters=dict(b.get("parameters", {}))) for b in base["blocks"]]
+        names = [b["name"] for b in blocks]
+        for block, params in overrides.items():
+            if block not in names:
+                raise ExperimentError(path, f"parameters.{block}",
+                                      f"parameters for unknown block {block!r} (blocks: {', '.join(names)})")
+            blocks[names.index(block)]["parameters"].update(params)
+        merged["blocks"] = blocks
+        if "abstract" not in data:
+            merged.pop("abstract", None)
+        data = merged
+    elif "blocks" not in data:
+        raise ExperimentError(path, "blocks", "missing key: the experiment needs [[blocks]] tables (name, "
+                                              "fmu, parameters), or a `base` to take them from")
+    return data
 
 
 def _resolve(value, robot: str | None, where: str):
@@ -69,31 +284,45 @@ def _resolve(value, robot: str | None, where: str):
 
 
 def load(name_or_path: str | Path, fmu_dir: str | Path | None = None) -> System:
-    """The :class:`System` of an experiment (by name or TOML path)."""
+    """The :class:`System` of an experiment (by name or TOML path).
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        A packaged experiment's name (``available()``) or an experiment file.
+    fmu_dir : str or Path, optional
+        FMU folder (default: the file's ``fmu_dir``, else ``fmus``).
+
+    Returns
+    -------
+    System
+        With :attr:`~robofmu.system.diagram.System.source` the experiment's file.
+
+    Raises
+    ------
+    ExperimentError
+        One line naming the file and the key: unknown experiment, unreadable file, TOML syntax
+        error (with its line), missing or unknown key, a value of the wrong type, a base that
+        does not exist, an unknown robot or role.
+    """
     path = _path(name_or_path)
-    data = tomllib.loads(path.read_text())
-    if "base" in data:
-        base = tomllib.loads(_path(path.parent / f"{data['base']}.toml").read_text())
-        overrides = data.pop("parameters", {})
-        data.pop("base")
-        merged = {**base, **data}
-        blocks = [dict(b, parameters=dict(b.get("parameters", {}))) for b in base["blocks"]]
-        names = [b["name"] for b in blocks]
-        for block, params in overrides.items():
-            if block not in names:
-                raise ValueError(f"{path}: parameters for unknown block {block!r} (blocks: {', '.join(names)})")
-            blocks[names.index(block)]["parameters"].update(params)
-        merged["blocks"] = blocks
-        data = merged
+    data = _merged(path)
     robot = data.get("robot")
     if robot is not None:
-        load_description(robot)          # an unknown robot fails here, naming the known ones
-    roles = data.get("roles", {})
-    unknown = sorted(set(roles) - set(ROLES))
-    if unknown:
-        raise ValueError(f"{path}: roles: unknown role {unknown[0]!r} (known: {', '.join(ROLES)})")
+        try:
+            load_description(robot)          # an unknown robot fails here, naming the known ones
+        except ValueError as exc:
+            raise ExperimentError(path, "robot", str(exc)) from None
     data.pop("abstract", None)
     for b in data["blocks"]:
-        b["parameters"] = {k: _resolve(v, robot, f"{path.name}: {b['name']}.{k}")
-                           for k, v in b.get("parameters", {}).items()}
-    return System.from_dict(data, fmu_dir)
+        try:
+            b["parameters"] = {k: _resolve(v, robot, f"{b['name']}.{k}")
+                               for k, v in b.get("parameters", {}).items()}
+        except ValueError as exc:
+            raise ExperimentError(path, None, str(exc)) from None
+    try:
+        system = System.from_dict(data, fmu_dir)
+    except ValueError as exc:
+        raise ExperimentError(path, None, str(exc)) from None
+    system.source = path
+    return system

@@ -18,6 +18,12 @@ signal vector, one batched fmi2SetReal per block from it; no buffer is allocated
 FMI functions are taken from the FMU's shared library as fmpy loaded it (``FMU2Slave.dll``) and
 called without fmpy's per-call Python wrapper; the master checks each returned status itself.
 
+Ctrl-C (SIGINT) during :meth:`Master.run` stops the run at the next communication point: a
+handler installed for the run only notes the signal (a KeyboardInterrupt raised inside an FMU's
+Python code would take pythonfmu's fragile exception path), the loop checks it after recording
+each point, the FMUs are terminated and freed, and :class:`Interrupted` carries the points
+recorded so far.
+
 ``Result``, ``DiagramError`` and ``step_count`` are re-exported from
 :mod:`robofmu.system.result` and :mod:`robofmu.system.check`.
 """
@@ -25,7 +31,11 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
+import signal
+import threading
 import time as _time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
@@ -34,11 +44,12 @@ import numpy as np
 from fmpy.fmi2 import fmi2Boolean, fmi2Component, fmi2Real, fmi2Status, fmi2True, fmi2ValueReference
 
 from .check import DiagramError, Link, Node, Plan, plan, step_count, variable_unit
-from .diagram import System, select
+from .diagram import System, select, unmatched
 from .fmu import STATUS, Block, FMUError, LogMessage
 from .result import Result
 
-__all__ = ["ALGORITHMS", "DiagramError", "Master", "Result", "SimulationError", "step_count"]
+__all__ = ["ALGORITHMS", "DiagramError", "Interrupted", "Master", "Result", "SimulationError", "available_memory",
+           "step_count"]
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 
@@ -54,13 +65,87 @@ class SimulationError(RuntimeError):
         The communication point (s) of the failure (None: at instantiation).
     result : Result or None
         Everything recorded up to the failure (None if it failed before the first point).
+    reason : str
+        The message without the note on the results kept.
     """
 
-    def __init__(self, message: str, block: str | None, time: float | None, result: Result | None):
+    def __init__(self, message: str, block: str | None, time: float | None, result: Result | None,
+                 reason: str | None = None):
         super().__init__(message)
         self.block = block
         self.time = time
         self.result = result
+        self.reason = message if reason is None else reason
+
+
+class Interrupted(SimulationError):
+    """The run was interrupted (SIGINT: Ctrl-C) and stopped at a communication point.
+
+    The master stops at the first communication point after the signal, once that point is
+    recorded; the FMUs are terminated and freed as after any run. ``time`` is the last recorded
+    point (None: interrupted before the first one), ``result`` every point up to it, ``block`` None.
+    """
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (``MemAvailable``), or None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _compact(names: list[str]) -> list[str]:
+    """Signal names with each vector written once: ``plant.q[1..4]``, ``trajectory.grip``."""
+    bases: dict[str, list[int]] = {}
+    for name in names:
+        head, bracket, rest = name.partition("[")
+        if bracket and rest[:-1].isdigit():
+            bases.setdefault(head, []).append(int(rest[:-1]))
+        else:
+            bases.setdefault(name, [])
+    return [f"{base}[{min(i)}..{max(i)}]" if len(i) > 1 else f"{base}[{i[0]}]" if i else base
+            for base, i in bases.items()]
+
+
+def _gigabytes(n: int) -> str:
+    """A byte count for messages: 38.5 GB, 288 TB."""
+    for size, unit in ((1e12, "TB"), (1e9, "GB"), (1e6, "MB")):
+        if n >= size or unit == "MB":
+            return f"{n / size:.3g} {unit}"
+
+
+@contextmanager
+def _sigint_flag():
+    """While the block runs, SIGINT sets ``flag[0]`` instead of raising KeyboardInterrupt.
+
+    A KeyboardInterrupt raised inside an FMU's Python code would take pythonfmu's exception
+    path (see docs/design.md), so the run only notes the signal and the loop stops at the next
+    communication point. The previous handler is restored afterwards. Outside the main thread,
+    or when the current handler was not installed from Python, nothing is installed.
+    """
+    flag = [False]
+    previous = None
+    installed = False
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.getsignal(signal.SIGINT)
+        if previous is not None:
+            def note(signum, frame):
+                flag[0] = True
+            signal.signal(signal.SIGINT, note)
+            installed = True
+    try:
+        yield flag
+    finally:
+        if installed:
+            signal.signal(signal.SIGINT, previous)
 
 
 class Master:
@@ -70,7 +155,9 @@ class Master:
     ----------
     system : System
     record : list of str, optional
-        ``instance.variable`` patterns (fnmatch) of the outputs to record; default all outputs.
+        The outputs to record, each entry an exact ``instance.variable`` (``plant.q[2]``), a
+        vector base (``plant.q``) or an fnmatch pattern (``plant.*``); default all outputs. An
+        entry that names no output is refused by :meth:`check` (DiagramError).
     progress : callable, optional
         ``progress(fraction, t)`` about 20 times in a run (t in s).
     log : callable, optional
@@ -97,9 +184,47 @@ class Master:
 
     # -- the plan ----------------------------------------------------------------------------------
     def check(self) -> list[str]:
-        """Refuse a diagram that cannot run (DiagramError); return the warnings."""
-        self.plan = plan(self.system)
+        """Refuse a diagram that cannot run (DiagramError); return the warnings.
+
+        Besides :func:`~robofmu.system.check.plan`'s checks, every ``record`` entry must name
+        at least one output (the refusal names the entry and some of the outputs).
+        """
+        planned = plan(self.system)
+        outputs = [f"{name}.{v.name}" for name in planned.order
+                   for v in planned.nodes[name].model_description.modelVariables
+                   if v.causality == "output" and v.type in ("Real", "Boolean")]
+        missing = unmatched(outputs, self.record)
+        if missing:
+            problems = []
+            for entry in missing:
+                block = entry.split(".", 1)[0]
+                near = [o for o in outputs if o.split(".", 1)[0] == block]
+                shown = _compact(near or outputs)
+                problems.append(f"record: {entry!r} names no output ({'outputs of ' + block if near else 'outputs'}: "
+                                f"{', '.join(shown[:12])}{', ...' if len(shown) > 12 else ''})")
+            raise DiagramError(self.system.name, problems)
+        self.plan = planned
         return self.plan.warnings
+
+    def recorded_columns(self) -> int:
+        """How many signals a run records (plans the diagram first if :meth:`check` has not run)."""
+        if self.plan is None:
+            self.check()
+        self._layout()
+        return len(self.keep)
+
+    def memory_problem(self, n_steps: int) -> str | None:
+        """Why a run of ``n_steps`` steps would not fit in memory, or None if it fits.
+
+        The recording takes (n + 1) rows x (recorded signals + time) x 8 bytes; it must fit in
+        half the memory available (:func:`available_memory`; the analysis of a run makes copies).
+        """
+        columns = self.recorded_columns()
+        need, free = (n_steps + 1) * (columns + 1) * 8, available_memory()
+        if free is None or need <= free / 2:
+            return None
+        return (f"{n_steps} steps x {columns} recorded signals need {_gigabytes(need)} of memory, more "
+                f"than half of the {_gigabytes(free)} available")
 
     @property
     def nodes(self) -> dict[str, Node]:
@@ -146,9 +271,20 @@ class Master:
 
         Raises
         ------
+        ValueError
+            A bad step or stop time (not a whole number of steps), an unknown algorithm, or a
+            recording that would not fit in memory (:meth:`memory_problem`); nothing is
+            instantiated.
+        DiagramError
+            The diagram or the ``record`` selection cannot run (:meth:`check`).
         SimulationError
             Naming the block, the time and the FMU's message; its ``result`` holds every point
             recorded so far.
+        Interrupted
+            SIGINT (Ctrl-C) during the run: the run stops at the next communication point; its
+            ``result`` holds every point up to it (also written to ``csv_path``). The handler
+            that notes the signal is installed for the run only (main thread), the previous one
+            restored afterwards.
         """
         system = self.system
         stop_time = system.stop_time if stop_time is None else float(stop_time)
@@ -159,11 +295,17 @@ class Master:
         n_steps = step_count(start_time, stop_time, h)
         if self.plan is None:
             self.check()
-        try:
-            self._instantiate(start_time, stop_time)
-            return self._loop(start_time, h, n_steps, algorithm, csv_path)
-        finally:
-            self.close()
+        problem = self.memory_problem(n_steps)
+        if problem:
+            raise ValueError(problem)
+        with _sigint_flag() as interrupted:
+            try:
+                self._instantiate(start_time, stop_time)
+                if interrupted[0]:
+                    raise Interrupted("interrupted before the first communication point", None, None, None)
+                return self._loop(start_time, h, n_steps, algorithm, csv_path, interrupted)
+            finally:
+                self.close()
 
     def _instantiate(self, start_time: float, stop_time: float) -> None:
         self.blocks = {}
@@ -258,8 +400,9 @@ class Master:
                   + [op for sets_early, sets_late in zip(early, late) for op in sets_early + sets_late])
         return gauss_seidel, jacobi, steps     # Jacobi, too, starts from a consistent first exchange
 
-    def _loop(self, t0: float, h: float, n_steps: int, algorithm: str, csv_path) -> Result:
-        self._layout()
+    def _loop(self, t0: float, h: float, n_steps: int, algorithm: str, csv_path,
+              interrupted: list | None = None) -> Result:
+        interrupted = [False] if interrupted is None else interrupted
         real_signals, boolean_signals = self.real_signals, self.boolean_signals
         n_real = len(real_signals)
         row = np.zeros(n_real + len(boolean_signals))
@@ -288,6 +431,8 @@ class Master:
                     row[n_real:] = boolean_signals
                     recorded[k] = row[self.keep]
                 n_recorded = k + 1
+                if interrupted[0]:                 # SIGINT: stop at this recorded point
+                    raise _Failure("", "interrupted", "SIGINT")
                 if k == n_steps:
                     break
                 for op in steps:
@@ -295,6 +440,15 @@ class Master:
                 if self.progress is not None and (k + 1) % every == 0:
                     self.progress((k + 1) / n_steps, t + h)
         except _Failure as exc:
+            if exc.call == "SIGINT":
+                reason = f"interrupted at t = {t:.9g} s"
+                result = Result(times[:n_recorded].copy(), list(self.columns), recorded[:n_recorded].copy(),
+                                {"interrupted": float(t), "algorithm": algorithm, "step": h}, dict(self.units))
+                if csv_path is not None:
+                    result.to_csv(csv_path)
+                raise Interrupted(reason + f"; results up to t = {t:.9g} s kept"
+                                  + (f" in {csv_path}" if csv_path else ""), None, float(t), result,
+                                  reason) from None
             if exc.call:
                 logged = [m.message for m in self.blocks[exc.block].messages
                           if m.status in ("ERROR", "FATAL", "DISCARD")]
@@ -308,7 +462,7 @@ class Master:
                 result.to_csv(csv_path)
             raise SimulationError(message + (f"\nresults up to t = {times[n_recorded - 1]:.9g} s kept"
                                              + (f" in {csv_path}" if csv_path else "") if n_recorded else ""),
-                                  exc.block, float(t), result) from None
+                                  exc.block, float(t), result, message) from None
         result = Result(times, list(self.columns), recorded,
                         {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall,
                          "order": list(self.order)}, dict(self.units))

@@ -26,8 +26,8 @@ Things libcosimpy 0.0.6 cannot do directly and how this file copes (see system/l
   C++ runtime calls std::terminate: the whole process aborts (SIGABRT), no Python exception.
   A failing fmi2DoStep, by contrast, is reported (CosimError) and a failing fmi2Instantiate
   too. The abort is demonstrated in a child process (test_failed_initialization_...).
-- libcosim's log, FMU messages included, goes to the C++ stdout (not to Python, not to the
-  error message: a refused step reads only "plant: Step not complete").
+- libcosim's log, FMU messages included, goes to the C++ stdout; a refused step (fmi2Error) comes
+  back with the FMU's message: "plant: Model error: plant: input tau[2] = nan ...".
 - libcosim's fixed-step algorithm is a Jacobi scheme: connected values are transferred after each
   step, so every connection adds one step of delay (trajectory -> ik -> controller: two).
 """
@@ -287,9 +287,10 @@ def test_failed_step_raises_with_libcosim_message(cosim, fmu_dir):
     run.add(fmu_dir / "plant.fmu", "plant")
     run.step(3)
     run.override("plant", "tau[2]", float("nan"))
-    with pytest.raises(RuntimeError, match=r"from t = 0.003 s failed: .*plant: Step not complete"):
+    with pytest.raises(RuntimeError, match=r"from t = 0.003 s failed: .*plant: Model error: plant: "
+                                           r"input tau\[2\] = nan at t = 0.003 s is not finite; step refused"):
         run.step(3)
-    # the FMU's own message ("input tau[2] = nan ... step refused") goes to libcosim's log only
+    # the FMU returns fmi2Error with its message, which libcosim puts into its error
     assert run.execution.status().current_time == 3_000_000
 
 
@@ -329,6 +330,7 @@ def test_failed_initialization_aborts_the_process(fmu_dir, tmp_path):
     else:                           # libcosimpy 0.0.6's libcosim: std::terminate
         assert proc.returncode == -signal.SIGABRT, proc.stderr
         assert "terminate called after throwing an instance of 'cosim::error'" in proc.stderr
-        assert "Fatal py exception encountered: [exitInitializationMode]" in proc.stderr
+        assert ("Model error: plant: initialization failed: parameter max_substep = -1 s is invalid: "
+                "must be > 0") in proc.stderr         # the FMU's fmi2Error message
         assert "SURVIVED" not in proc.stdout
         assert list(tmp_path.glob("libcosim_*"))      # the leftover landed in TMPDIR, not /tmp

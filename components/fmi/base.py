@@ -13,10 +13,18 @@ and maps the FMI life cycle onto the block's hooks:
 It turns exceptions into logged errors, works around pythonfmu 0.7.0 (docs/design.md), saves the
 full internal state for fmi2GetFMUstate/fmi2SetFMUstate, and has the model description pythonfmu
 writes completed by :mod:`.model_description`.
+
+FMI statuses: in a robofmu FMU, robofmu's export library (``robofmu.system.fmi_export``) stands
+in front of pythonfmu's and returns the status of every message logged with the category
+:data:`STATUS_CATEGORY` from the FMI call it is logged in. So a refused step or invalid input
+is fmi2Error (:meth:`BlockSlave.fail`, :meth:`BlockSlave._raise_to_importer`), and the instance
+stays usable. Behind pythonfmu's library alone (its win64 one, or a slave used without a FMU)
+only raising fails a call (fmi2Fatal), and a refused step is fmi2Discard.
 """
 from __future__ import annotations
 
 import ctypes
+import functools
 import json
 import math
 import sys
@@ -40,6 +48,23 @@ _VARIABILITY = {v.name: v for v in Fmi2Variability}
 _INITIAL = {i.name: i for i in Fmi2Initial}
 _PYTHONFMU_TYPES = {"Real": Real, "Boolean": Boolean, "Integer": Integer, "String": String}
 
+#: A message logged with this category makes robofmu's export library return the message's
+#: status from the FMI call (``robofmu.system.fmi_export.STATUS_CATEGORY``; the importer sees
+#: pythonfmu's usual category, ``logStatusError``...).
+STATUS_CATEGORY = "robofmu:status"
+_PYTHONFMU_LIBRARY = "libpythonfmu-export.so"   # beside robofmu's in binaries/linux64
+
+
+def _behind_robofmu_export(resources) -> bool:
+    """Whether robofmu's export library stands in front of this instance: its FMU keeps
+    pythonfmu's own library beside robofmu's in ``binaries/linux64`` (``robofmu.system.fmi_export``)."""
+    return (bool(resources) and sys.platform.startswith("linux")
+            and (Path(resources).parent / "binaries" / "linux64" / _PYTHONFMU_LIBRARY).is_file())
+
+
+class _CallFailed(RuntimeError):
+    """The current FMI call fails; its message has been logged."""
+
 
 def _balance_pythonfmu_refcount(cls) -> None:
     """Work around pythonfmu 0.7.0's loader, which releases a reference it does not own to the
@@ -61,6 +86,7 @@ class BlockSlave(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self._statuses = _behind_robofmu_export(self.resources)     # see _fmi_entry
         _balance_pythonfmu_refcount(type(self))
         if self.resources:
             check_bundle(self.resources)
@@ -198,10 +224,16 @@ class BlockSlave(Fmi2Slave):
         return super().get_boolean(vrs)
 
     # -- helpers --------------------------------------------------------------------------------
-    def fail(self, message: str) -> bool:
-        """Log ``message`` as an error through the FMI logger; returns False (step refused)."""
-        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
+    def fail(self, message: str, status: Fmi2Status = Fmi2Status.error) -> bool:
+        """Refuse the step: log ``message``, return False. Behind robofmu's export library
+        fmi2DoStep returns ``status`` (fmi2Error; fmi2Discard only where a smaller step could
+        succeed and the importer retries), behind pythonfmu's alone fmi2Discard."""
+        self._report(message, status)
         return False
+
+    def _report(self, message: str, status: Fmi2Status = Fmi2Status.error) -> None:
+        """Log ``message``; behind robofmu's export library the current FMI call returns ``status``."""
+        self.log(f"{self.instance_name}: {message}", status, STATUS_CATEGORY if self._statuses else None)
 
     def warn(self, message: str) -> None:
         self.log(f"{self.instance_name}: {message}", Fmi2Status.warning)
@@ -250,19 +282,11 @@ class BlockSlave(Fmi2Slave):
         self._terminated = True
 
     def _raise_to_importer(self, message: str):
-        """Log ``message`` as an error, then make the current FMI call fail.
-
-        pythonfmu 0.7.0 ignores return values outside doStep, so raising is the only way to
-        return a non-OK status (it becomes fmi2Fatal). Its exception handler delivers the
-        logged message, but drops the exception text ("unknown error") and releases the
-        instance, its class and its log queue once more than it took them (they are released
-        again when the instance is freed): take those references first, so that freeing the
-        instance later does not crash the process.
-        """
-        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
-        for obj in (self, self.log_queue, type(self)):
-            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
-        raise RuntimeError(f"{self.instance_name}: {message}")
+        """Log ``message`` as an error and abandon the current FMI call, which fails with
+        fmi2Error behind robofmu's export library (the entry point returns normally, see
+        :func:`_fmi_entry`) and with fmi2Fatal behind pythonfmu's alone."""
+        self._report(message)
+        raise _CallFailed(f"{self.instance_name}: {message}")
 
     def _nonfinite_output(self) -> str | None:
         """Why the outputs just computed are not finite (naming the largest input), or None."""
@@ -423,3 +447,53 @@ class BlockSlave(Fmi2Slave):
     def to_xml(self, model_options=dict()) -> Element:
         """pythonfmu's model description, completed (see :mod:`.model_description`)."""
         return complete(super().to_xml(model_options), self.logic, self.robot_name, self.block_kind)
+
+
+def _keep_for_pythonfmu_handler(slave) -> None:
+    """pythonfmu 0.7.0's exception handler releases the instance, its class and its log queue
+    once more than it took them (and again when the instance is freed): take those references
+    before an exception reaches it, so that freeing the instance later does not crash."""
+    for obj in (slave, slave.log_queue, type(slave)):
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+
+
+def _fmi_entry(method, fallback, call: str):
+    """``method``, as pythonfmu's library calls it for the FMI function ``call``.
+
+    Behind robofmu's export library a failure (:meth:`BlockSlave._raise_to_importer`, or any
+    exception, then logged with its traceback) returns ``fallback(*args)``: the logged
+    :data:`STATUS_CATEGORY` message makes the call return fmi2Error, and the instance stays
+    usable. Behind pythonfmu's library alone the exception propagates (fmi2Fatal), after the
+    references its handler drops are taken."""
+    @functools.wraps(method)
+    def entry(self, *args):
+        try:
+            return method(self, *args)
+        except Exception as exc:
+            if not isinstance(exc, _CallFailed):
+                self._report(f"{call} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
+            if not self._statuses:
+                _keep_for_pythonfmu_handler(self)
+                raise
+        return fallback(*args)
+    return entry
+
+
+_NOTHING = lambda *args: None  # noqa: E731
+for _name, _call, _fallback in [
+        ("setup_experiment", "fmi2SetupExperiment", _NOTHING),
+        ("enter_initialization_mode", "fmi2EnterInitializationMode", _NOTHING),
+        ("exit_initialization_mode", "fmi2ExitInitializationMode", _NOTHING),
+        ("terminate", "fmi2Terminate", _NOTHING),
+        ("do_step", "fmi2DoStep", lambda *args: False),
+        ("get_real", "fmi2GetReal", lambda vrs: [math.nan] * len(vrs)),
+        ("get_integer", "fmi2GetInteger", lambda vrs: [0] * len(vrs)),
+        ("get_boolean", "fmi2GetBoolean", lambda vrs: [False] * len(vrs)),
+        ("get_string", "fmi2GetString", lambda vrs: [""] * len(vrs)),
+        ("set_real", "fmi2SetReal", _NOTHING),
+        ("set_integer", "fmi2SetInteger", _NOTHING),
+        ("set_boolean", "fmi2SetBoolean", _NOTHING),
+        ("set_string", "fmi2SetString", _NOTHING),
+        ("_get_fmu_state", "fmi2GetFMUstate", _NOTHING),
+        ("_set_fmu_state", "fmi2SetFMUstate", _NOTHING)]:
+    setattr(BlockSlave, _name, _fmi_entry(getattr(BlockSlave, _name), _fallback, _call))

@@ -44,6 +44,33 @@ def blocks_of(robot: str) -> list[str]:
     return list(load_description(robot).blocks)
 
 
+#: What the bundled robofmu.components imports at run time (distribution names).
+RUNTIME_PACKAGES = ("numpy", "pin", "pythonfmu")
+
+
+def runtime_requirements() -> list[str]:
+    """The requirement lines of the packages a FMU needs in its interpreter, as robofmu declares
+    them (its own metadata), for ``resources/requirements.txt`` (``pythonfmu deploy`` reads it)."""
+    from importlib.metadata import PackageNotFoundError, requires, version
+
+    try:
+        declared = requires("robofmu") or []
+    except PackageNotFoundError:
+        declared = []
+    lines = []
+    for name in RUNTIME_PACKAGES:
+        spec = next((r.split(";")[0].strip() for r in declared
+                     if r.split(";")[0].strip().replace(" ", "").lower().startswith(name)
+                     and not r.split(";")[0].strip()[len(name):len(name) + 1].isalnum()), None)
+        if spec is None:
+            try:
+                spec = f"{name}>={version(name)}"
+            except PackageNotFoundError:
+                spec = name
+        lines.append(spec)
+    return lines
+
+
 def build(robot: str, out_dir: str | Path = "fmus", blocks: list[str] | None = None,
           log=print) -> list[Path]:
     """Build ``out_dir/<robot>/<block>.fmu`` for each block; returns the paths.
@@ -70,13 +97,15 @@ def build(robot: str, out_dir: str | Path = "fmus", blocks: list[str] | None = N
         package = staging / "robofmu" / "components"
         shutil.copytree(Path(components.__file__).parent, package,
                         ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        requirements = staging / "requirements.txt"
+        requirements.write_text("\n".join(runtime_requirements()) + "\n")
         for block in blocks:
             identifier = model_identifier(robot, block)
             script = staging / f"{identifier}.py"
             script.write_text(_SCRIPT.format(robot=robot, block=block, identifier=identifier))
             target = dest / f"{block}.fmu"
             try:
-                FmuBuilder.build_FMU(script, dest=target, project_files=[staging / "robofmu"],
+                FmuBuilder.build_FMU(script, dest=target, project_files=[staging / "robofmu", requirements],
                                      canGetAndSetFMUstate=True, canSerializeFMUstate=True)
             finally:
                 # pythonfmu's builder imports the script and leaves it (and its folder on

@@ -41,7 +41,7 @@ from .. import SOURCE_HASH, check_bundle
 from ..blocks import StepRefused, block_type
 from ..robots import load_description, load_model
 from ..robots.description import read
-from .model_description import VENDOR_TOOL, complete  # noqa: F401  (VENDOR_TOOL: public here)
+from .model_description import PYTHON, VENDOR_TOOL, complete  # noqa: F401  (VENDOR_TOOL: public here)
 
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
 _VARIABILITY = {v.name: v for v in Fmi2Variability}
@@ -97,7 +97,8 @@ class BlockSlave(Fmi2Slave):
         self.logic.logger = self._log_from_block
         self.author = "robofmu"
         self.version = f"0.1.0+{SOURCE_HASH[:12]}"
-        self.description = f"robofmu {self.block_kind} block of robot '{self.robot_name}': {self.logic.summary}"
+        self.description = (f"robofmu {self.block_kind} block of robot '{self.robot_name}': {self.logic.summary}. "
+                            f"Runs in Python {PYTHON} with the packages of resources/requirements.txt")
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=self.logic.nominal_stop_time(),
                                                     step_size=1e-3)
         self.time = 0.0

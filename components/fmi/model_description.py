@@ -3,9 +3,13 @@ dependencies, round-trip start values and a robofmu vendor annotation naming rob
 """
 from __future__ import annotations
 
+import sys
 from xml.etree.ElementTree import Element, SubElement
 
 from .. import SOURCE_HASH
+
+#: The Python (major.minor) the FMUs are built with and run in (pythonfmu loads libpython).
+PYTHON = f"{sys.version_info.major}.{sys.version_info.minor}"
 
 #: SI base-unit exponents of every unit a block may use (FMI 2.0 UnitDefinitions).
 UNITS = {
@@ -41,8 +45,8 @@ def complete(root: Element, logic, robot: str, kind: str) -> Element:
     root.insert(tags.index("CoSimulation") + 1, units)
     annotations = Element("VendorAnnotations")
     tool = SubElement(annotations, "Tool", name=VENDOR_TOOL)
-    SubElement(tool, "Block", robot=robot, kind=kind,
-               variant=logic.variant, source=SOURCE_HASH)
+    SubElement(tool, "Block", robot=robot, kind=kind, variant=logic.variant, source=SOURCE_HASH,
+               python=PYTHON, requirements="resources/requirements.txt")
     root.insert([c.tag for c in root].index("ModelVariables"), annotations)
 
     index = {}

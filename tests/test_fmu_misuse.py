@@ -279,3 +279,23 @@ def test_trajectory_refuses_inconsistent_or_non_finite_references(fmu_root, para
         assert "fmi2ExitInitializationMode" in str(info.value) and message in str(info.value)
     finally:
         b.close()
+
+
+@pytest.mark.parametrize("call, kind_of_reference", [
+    ("getBoolean", "Real"), ("getReal", "Boolean"), ("getInteger", "Real"), ("getString", "Real"),
+    ("setBoolean", "Real"), ("setReal", "Boolean")])
+def test_value_reference_of_the_wrong_type_is_an_error_naming_the_variable(fmu_root, call, kind_of_reference):
+    """An importer treating every port as Real (or any other type confusion) gets fmi2Error and
+    the variable's name, never a NaN."""
+    b = open_block(fmu_root / "chess", "plant")
+    try:
+        variable = "q[2]" if kind_of_reference == "Real" else "grip"
+        vr = [b.variables[variable].valueReference]
+        fn = getattr(b.slave, call)
+        args = (vr,) if call.startswith("get") else (vr, [True] if call == "setBoolean" else [1.0])
+        status, logged = refused(b, f"fmi2{call[0].upper()}{call[1:]}", fn, *args)
+        assert status == "error"
+        assert f"value references of ['{variable}'] do not name" in logged
+        b.do_step(0.0, H)                             # the instance is still usable
+    finally:
+        b.close()

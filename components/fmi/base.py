@@ -219,10 +219,48 @@ class BlockSlave(Fmi2Slave):
         self.values[self._index(vrs, allowed, "fmi2SetReal")] = values
         self._dirty = True
 
+    def _check_kind(self, vrs, kind: str, call: str, setting: bool = False) -> None:
+        """Refuse value references that are not ``kind`` variables (or, when ``setting``, not
+        settable now), naming the variables."""
+        bad = []
+        for vr in vrs:
+            if not 0 <= vr < len(self.values):
+                bad.append(vr)
+                continue
+            var = self.logic.variables[vr]
+            if setting and var.kind == kind and var.causality == "parameter" and self._initialized:
+                self._raise_to_importer(f"cannot set parameter {var.name}: parameters are fixed once initialized")
+            if var.kind != kind or (setting and var.causality == "output"):
+                bad.append(var.name)
+        if bad:
+            wanted = f"settable {kind} variables" if setting else f"{kind} variables"
+            self._raise_to_importer(f"{call}: value references of {bad} do not name {wanted}")
+
     def get_boolean(self, vrs):
+        self._check_kind(vrs, "Boolean", "fmi2GetBoolean")
         if self._dirty:
             self._refresh()
         return super().get_boolean(vrs)
+
+    def set_boolean(self, vrs, values):
+        self._check_kind(vrs, "Boolean", "fmi2SetBoolean", setting=True)
+        super().set_boolean(vrs, values)
+
+    def get_integer(self, vrs):
+        self._check_kind(vrs, "Integer", "fmi2GetInteger")
+        return super().get_integer(vrs)
+
+    def set_integer(self, vrs, values):
+        self._check_kind(vrs, "Integer", "fmi2SetInteger", setting=True)
+        super().set_integer(vrs, values)
+
+    def get_string(self, vrs):
+        self._check_kind(vrs, "String", "fmi2GetString")
+        return super().get_string(vrs)
+
+    def set_string(self, vrs, values):
+        self._check_kind(vrs, "String", "fmi2SetString", setting=True)
+        super().set_string(vrs, values)
 
     # -- helpers --------------------------------------------------------------------------------
     def fail(self, message: str, status: Fmi2Status = Fmi2Status.error) -> bool:
@@ -487,7 +525,7 @@ for _name, _call, _fallback in [
         ("exit_initialization_mode", "fmi2ExitInitializationMode", _NOTHING),
         ("terminate", "fmi2Terminate", _NOTHING),
         ("do_step", "fmi2DoStep", lambda *args: False),
-        ("get_real", "fmi2GetReal", lambda vrs: [math.nan] * len(vrs)),
+        ("get_real", "fmi2GetReal", lambda vrs: [0.0] * len(vrs)),      # with fmi2Error; no NaN leaves
         ("get_integer", "fmi2GetInteger", lambda vrs: [0] * len(vrs)),
         ("get_boolean", "fmi2GetBoolean", lambda vrs: [False] * len(vrs)),
         ("get_string", "fmi2GetString", lambda vrs: [""] * len(vrs)),

@@ -16,6 +16,7 @@ the rpp bang-bang at half time, the FK of rrp and rpp, free fall qdd = M^-1 (-g)
 from __future__ import annotations
 
 import math
+import sys
 import re
 import xml.etree.ElementTree as ET
 import zipfile
@@ -197,7 +198,9 @@ def test_vendor_annotation_names_robot_and_block(fmu_root, robot, block):
     (annotation,) = tool.findall("Block")
     description = load_description(robot)
     variant = description.trajectory.kind if block == "trajectory" else ""
-    assert annotation.attrib == {"robot": robot, "kind": block, "variant": variant, "source": SOURCE_HASH}
+    assert annotation.attrib == {"robot": robot, "kind": block, "variant": variant, "source": SOURCE_HASH,
+                                 "python": f"{sys.version_info.major}.{sys.version_info.minor}",
+                                 "requirements": "resources/requirements.txt"}
     assert f"robofmu {block} block of robot '{robot}'" in root.get("description")
 
 

@@ -418,7 +418,7 @@ class Master:
                 t = times[k]
                 for op in (first if k == 0 else exchange):    # Jacobi, too, starts consistent
                     op()
-                if not math.isfinite(real_signals.dot(real_signals)) and not np.isfinite(real_signals).all():
+                if not math.isfinite(real_signals.sum()) and not np.isfinite(real_signals).all():
                     index = int(np.flatnonzero(~np.isfinite(real_signals))[0])
                     bad = self.real_names[index]
                     raise _Failure(bad.split(".")[0], f"output {bad} is not finite "

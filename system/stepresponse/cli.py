@@ -12,6 +12,7 @@ from pathlib import Path
 
 from robofmu.components.robots import available, load_description
 
+from ..master import Interrupted
 from .design import design_gains
 from .experiment import CONTROLLER, DEFAULT_STEP_HEIGHT, DRIVERS, PLANT, compare, cosimulate_step, \
     plot_comparison, step_setup, write_csv
@@ -136,6 +137,9 @@ def _step_command(args) -> int:
         result = cosimulate_step(Path(args.fmus), kp, kd, ki, robot=args.robot, step=setup.heights,
                                  h=args.step_size, t_end=t_end, joint=setup.joints, q0=setup.q0,
                                  driver=args.driver)
+    except Interrupted as exc:      # Ctrl-C: stopped at a communication point
+        print(f"{PROG}: interrupted at t = {exc.time:g} s", file=sys.stderr)
+        return 130
     except Exception as exc:        # DiagramError, SimulationError: one line each
         print(f"{PROG}: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1

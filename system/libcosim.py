@@ -18,9 +18,39 @@ throw from a worker thread, and the process dies of std::terminate (SIGABRT) ins
 :meth:`CosimRun.step` raising; run such cases in a child process. A refused fmi2DoStep and a
 failed fmi2Instantiate are reported as :class:`CosimError`. libcosim's log (FMU messages
 included) is written to the C++ stdout.
+
+Several executions in one process, one after the other or side by side, are independent: each
+:class:`CosimRun` (each ``add``, each ``from_ssp``) extracts its FMUs to a folder of its own, so
+every execution has its own copies of the FMU binaries and of pythonfmu's export library, and
+each block instance its own state (the Python modules the FMUs import are shared). Destroying an
+execution (:meth:`CosimRun.close`) frees its instances and unloads its copies of the binaries
+(all but the process's first copy of pythonfmu's library, see below).
+
+Process exit (pythonfmu 0.7.0). pythonfmu's export library keeps its Python state in a static
+``std::shared_ptr`` released by two hooks: its C++ destructor (run by ``exit()`` among the
+atexit handlers, or by ``dlclose``) and ``onLibraryUnload`` (a destructor function, run by
+``_dl_fini`` at exit or by ``dlclose``). ``dlclose`` runs the hook first, which empties the
+pointer: unloading mid-run is safe. At ``exit()`` the C++ destructor runs first and frees the
+state's control block without emptying the pointer; the hook then decrements a counter inside
+the freed block (valgrind: "Invalid read of size 4 ... finalizePythonInterpreter ... 8 bytes
+inside a block of size 128 free'd"). The first copy of the library loaded in a process is never
+unloaded (it defines C++ ``STB_GNU_UNIQUE`` symbols, which makes it ``NODELETE``), so every
+process that ever instantiated a pythonfmu FMU, with fmpy or libcosim, writes into freed heap
+memory while it exits. Mostly harmless, sometimes fatal: "corrupted double-linked list"
+(SIGABRT) or a segfault after the script's last line, more often the more the process did
+(two ``simulate_ssp`` or libcosim runs). :func:`guard_pythonfmu_exit` (called by every
+:class:`CosimRun` and by :func:`robofmu.system.ssp.run_ssp_fmpy`) registers
+:func:`release_pythonfmu_states` to run at interpreter exit: it calls the hook's body, the
+exported ``finalizePythonInterpreter``, of every pythonfmu library still loaded, which empties
+the pointer before either hook runs (both then do nothing). In a Python host the state is only
+a finished thread; the call touches no Python object.
 """
 from __future__ import annotations
 
+import atexit
+import ctypes
+import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,6 +75,112 @@ def _set_log_level(level: str | None) -> None:
 
 class CosimError(RuntimeError):
     """A libcosim call failed; the message carries libcosim's last error message."""
+
+
+# -- pythonfmu 0.7.0 at process exit (see the module notes) ---------------------------------------
+#: ``pythonfmu::createInstance(fmu_data)``: with ``finalizePythonInterpreter``, marks pythonfmu's
+#: export library (the FMU's own binary in plain pythonfmu FMUs, ``libpythonfmu-export.so``
+#: beside robofmu's export library in robofmu's)
+PYTHONFMU_MARK = b"_ZN9pythonfmu14createInstanceENS_8fmu_dataE"
+PYTHONFMU_FINALIZE = b"finalizePythonInterpreter"
+_exit_guard_registered = False
+
+
+class _PhdrInfo(ctypes.Structure):
+    """The first fields of ``struct dl_phdr_info`` (all that is read)."""
+    _fields_ = [("dlpi_addr", ctypes.c_void_p), ("dlpi_name", ctypes.c_char_p)]
+
+
+_PHDR_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(_PhdrInfo), ctypes.c_size_t, ctypes.c_void_p)
+
+
+def _dl():
+    """dl_iterate_phdr, dlopen, dlsym, dlclose of the C library, with their prototypes."""
+    libc = ctypes.CDLL(None)
+    libc.dl_iterate_phdr.argtypes = [_PHDR_CALLBACK, ctypes.c_void_p]
+    libc.dl_iterate_phdr.restype = ctypes.c_int
+    libc.dlopen.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    libc.dlopen.restype = ctypes.c_void_p
+    libc.dlsym.argtypes = [ctypes.c_void_p, ctypes.c_char_p]
+    libc.dlsym.restype = ctypes.c_void_p
+    libc.dlclose.argtypes = [ctypes.c_void_p]
+    libc.dlclose.restype = ctypes.c_int
+    return libc
+
+
+def pythonfmu_libraries() -> list[tuple[str, int]]:
+    """(path, address of ``finalizePythonInterpreter``) of every pythonfmu export library loaded
+    in this process (Linux; [] elsewhere). A library whose FMU folder was deleted keeps its path."""
+    if not sys.platform.startswith("linux"):
+        return []
+    libc = _dl()
+    names: list[bytes] = []
+
+    def visit(info, size, data):
+        name = info.contents.dlpi_name
+        if name:
+            names.append(name)
+        return 0
+
+    libc.dl_iterate_phdr(_PHDR_CALLBACK(visit), None)     # collect first: no dlopen under its lock
+    found = []
+    for name in names:
+        handle = libc.dlopen(name, os.RTLD_NOLOAD | os.RTLD_LAZY)   # loaded already, matched by name
+        if not handle:
+            continue
+        try:
+            finalize = libc.dlsym(handle, PYTHONFMU_FINALIZE)
+            if finalize and libc.dlsym(handle, PYTHONFMU_MARK):
+                found.append((os.fsdecode(name), finalize))
+        finally:
+            libc.dlclose(handle)                          # the reference NOLOAD took; nothing unloads
+    return found
+
+
+def _python_host() -> bool:
+    """Whether this interpreter was started as a program (``python ...``), not by pythonfmu's
+    own ``Py_Initialize`` in a host that is not Python (``sys.orig_argv`` is empty there): only
+    then is pythonfmu's state a finished thread that can be released at any time."""
+    return bool(getattr(sys, "orig_argv", None))
+
+
+def release_pythonfmu_states() -> int:
+    """Empty the Python state of every loaded pythonfmu export library now; returns how many.
+
+    Calls each library's ``finalizePythonInterpreter`` (what its unload hook calls): the state
+    is released while it is intact, and pythonfmu's two exit hooks then find nothing to release
+    (see the module notes). Harmless at any time in a Python host: instances do not use the
+    state, and a later instantiation creates a new one (release again before exit). Does
+    nothing in an interpreter pythonfmu started itself, or outside Linux.
+    """
+    if not _python_host():
+        return 0
+    released = 0
+    for _, finalize in pythonfmu_libraries():
+        ctypes.CFUNCTYPE(None)(finalize)()
+        released += 1
+    return released
+
+
+def _release_at_exit() -> None:
+    try:
+        release_pythonfmu_states()
+    except Exception:   # pragma: no cover - never fail an exiting interpreter
+        pass
+
+
+def guard_pythonfmu_exit() -> None:
+    """Register :func:`release_pythonfmu_states` to run at interpreter exit (once per process).
+
+    Python runs atexit handlers before the C library's exit handlers, so the release comes
+    before pythonfmu's destructors. Called by every :class:`CosimRun` and by
+    :func:`robofmu.system.ssp.run_ssp_fmpy`; call it yourself when you run robofmu (or any
+    pythonfmu 0.7.0) FMUs with fmpy or libcosimpy directly.
+    """
+    global _exit_guard_registered
+    if not _exit_guard_registered:
+        atexit.register(_release_at_exit)
+        _exit_guard_registered = True
 
 
 @dataclass(frozen=True)
@@ -85,6 +221,7 @@ class CosimRun:
         _set_log_level(log_level)
         if not step_size > 0:
             raise ValueError(f"step_size must be > 0 s, got {step_size}")
+        guard_pythonfmu_exit()
         self.step_size = float(step_size)
         self.execution = CosimExecution.from_step_size(to_ns(step_size)) if execution is None else execution
         self.observer = self.manipulator = None

@@ -50,6 +50,9 @@ fmpy.ssp (``fmpy.ssp.simulation.simulate_ssp``)
       time; the loop runs ``while time < stop_time`` with ``time += h`` accumulated. The runner
       asks for ``stop_time - h/2`` (exactly n steps) and relabels: its Result has rows at
       t0 + h .. t0 + n h.
+    - Every run extracts the package and each FMU again (new folders, deleted after the run) and
+      frees its instances, which unloads its copies of the binaries: runs one after the other
+      in one process are independent, and give identical results.
 
 libcosim (``CosimExecution.from_ssp_file`` -> ``cosim_ssp_fixed_step_execution_create``)
     - Loads a ``.ssp`` archive (or a folder/``.ssd``), FMUs by relative ``source``; reads
@@ -71,6 +74,10 @@ libcosim (``CosimExecution.from_ssp_file`` -> ``cosim_ssp_fixed_step_execution_c
     - Time is integer nanoseconds: no drift. Only Real variables can be recorded as time
       series; Boolean outputs are not in the Result. A FMU failing initialization aborts the
       process (see system/libcosim.py).
+
+Both runners register :func:`robofmu.system.libcosim.guard_pythonfmu_exit`: pythonfmu 0.7.0's
+export library writes into freed memory when a process that used it exits (sometimes an abort or
+a segfault after the last line of a script that ran two simulations); see system/libcosim.py.
 """
 from __future__ import annotations
 
@@ -306,6 +313,9 @@ def run_ssp_fmpy(path: str | Path, stop_time: float, step: float, start_time: fl
     from fmpy.ssp.simulation import simulate_ssp
     from fmpy.ssp.ssd import find_components, read_ssd
 
+    from .libcosim import guard_pythonfmu_exit       # ctypes only: libcosimpy is not needed
+
+    guard_pythonfmu_exit()
     path = Path(path)
     n = step_count(start_time, stop_time, step)
     ssd = read_ssd(str(path))

@@ -299,3 +299,16 @@ def test_value_reference_of_the_wrong_type_is_an_error_naming_the_variable(fmu_r
         b.do_step(0.0, H)                             # the instance is still usable
     finally:
         b.close()
+
+
+@pytest.mark.parametrize("robot", ["chess", "rrp", "rpp"])
+def test_bad_parameter_through_simulate_fmu_raises_with_the_fmus_message(fmu_root, robot, capfd):
+    """fmpy.simulate_fmu with its defaults (debug logging off, its own printing logger): the run
+    raises fmi2Error and the user sees the FMU's message naming the parameter."""
+    from fmpy import simulate_fmu
+
+    with pytest.raises(Exception, match=r"fmi2ExitInitializationMode failed with status 3 \(error\)"):
+        simulate_fmu(str(fmu_root / robot / "plant.fmu"), stop_time=0.01, step_size=H,
+                     start_values={"max_substep": -1.0})
+    shown = capfd.readouterr()
+    assert "initialization failed: parameter max_substep = -1 s is invalid: must be > 0" in shown.out + shown.err

@@ -15,6 +15,7 @@ from typing import Callable
 
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
+from fmpy.fmi1 import printLogMessage
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy import calloc, free
@@ -55,7 +56,9 @@ class FMUError(RuntimeError):
 # fmpy's native logger proxy (it formats the variadic message) remembers one Python logger for
 # the whole process, whichever instance registered last. So every Block registers the same
 # logger, and each instance's callbacks carry its own componentEnvironment, which the FMU hands
-# back with every message: the route to the Block the message belongs to.
+# back with every message: the route to the Block the message belongs to. A message of no
+# Block's (fmpy's own default callbacks, e.g. ``simulate_fmu`` without a logger, lead here too
+# once a Block exists) is printed as fmpy's default logger would.
 _ROUTES: dict[int, "Block"] = {}
 _NEXT_ROUTE = [1]
 
@@ -64,6 +67,8 @@ def _route_message(env, instance, status, category, message):
     block = _ROUTES.get(env or 0)
     if block is not None:
         block._log(env, instance, status, category, message)
+    else:
+        printLogMessage(env, instance, status, category, message)
 
 
 _LOGGER = fmi2CallbackLoggerTYPE(_route_message)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from robofmu.components.robots import load_model
+from robofmu.components.robots import available, load_model
 from robofmu.system.fmu import Block, FMUError
 
 from fmu_util import open_block, robot_blocks
@@ -301,12 +301,17 @@ def test_value_reference_of_the_wrong_type_is_an_error_naming_the_variable(fmu_r
         b.close()
 
 
-@pytest.mark.parametrize("robot", ["chess", "rrp", "rpp"])
-def test_bad_parameter_through_simulate_fmu_raises_with_the_fmus_message(fmu_root, robot, capfd):
+@pytest.mark.parametrize("robot", available())
+@pytest.mark.parametrize("block_first", [False, True], ids=["alone", "after-a-robofmu-block"])
+def test_bad_parameter_through_simulate_fmu_raises_with_the_fmus_message(fmu_root, robot, block_first, capfd):
     """fmpy.simulate_fmu with its defaults (debug logging off, its own printing logger): the run
-    raises fmi2Error and the user sees the FMU's message naming the parameter."""
+    raises fmi2Error and the user sees the FMU's message naming the parameter, also once a robofmu
+    Block has registered its logger with fmpy's process-wide logger proxy."""
     from fmpy import simulate_fmu
 
+    if block_first:
+        open_block(fmu_root / robot, "plant").close()
+        capfd.readouterr()
     with pytest.raises(Exception, match=r"fmi2ExitInitializationMode failed with status 3 \(error\)"):
         simulate_fmu(str(fmu_root / robot / "plant.fmu"), stop_time=0.01, step_size=H,
                      start_values={"max_substep": -1.0})

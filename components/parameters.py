@@ -29,6 +29,10 @@ class Parameter:
         Exclusive lower bound (the value must be greater).
     choices : tuple of str, optional
         Allowed values of a String.
+    size : {"joints"}, optional
+        A vector Real with one element per joint (FMU parameters ``name[1]`` ..); its value is a
+        list of numbers or the name of one of the robot's configurations (``"home"``), which the
+        block resolves. The bounds apply to every element.
     """
 
     name: str
@@ -40,9 +44,27 @@ class Parameter:
     high: float | None = None
     choices: tuple[str, ...] | None = None
     above: float | None = None
+    size: str | None = None
 
     def validate(self, value) -> Any:
-        """``value`` checked (and converted to the parameter's Python type); ValueError naming it."""
+        """``value`` checked (and converted to the parameter's Python type); ValueError naming it.
+        A vector's value is a tuple of floats (each element checked) or a configuration name."""
+        if self.size is not None:
+            if isinstance(value, str):
+                return value
+            if not isinstance(value, (list, tuple)) and not hasattr(value, "__len__"):
+                raise ValueError(f"parameter {self.name} = {value!r} is invalid: must be a list of "
+                                 "numbers (one per joint) or a configuration name")
+            element = Parameter(self.name, self.kind, self.unit, self.description, low=self.low,
+                                high=self.high, above=self.above)
+            checked = []
+            for k, item in enumerate(value, start=1):
+                try:
+                    checked.append(element.validate(item))
+                except ValueError as exc:
+                    raise ValueError(str(exc).replace(f"parameter {self.name} ",
+                                                      f"parameter {self.name}[{k}] ", 1)) from None
+            return tuple(checked)
         unit = f" {self.unit}" if self.unit not in ("", "1") else ""
         if self.kind == "String":
             if not isinstance(value, str) or (self.choices and value not in self.choices):

@@ -18,7 +18,7 @@ from robofmu.components.robots import ROBOTS_DIR, available
 SYSTEM = Path(__file__).resolve().parents[1] / "system"
 #: Numbers too common to tell a robot by (0, 1, 2, a half, ...).
 COMMON = {0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 10.0, 20.0, 100.0, 0.5, 0.25, 0.1, 0.2, 1.5, 0.05, 1e-3, 0.001, 0.01,
-          0.02, 0.005, 0.002, 1e-9, 1e-12, 9.81, 1000.0, 1e3, 0.3, 0.15, 40.0, 400.0}
+          0.02, 0.005, 0.002, 1e-9, 1e-12, 9.81, 1000.0, 1e3, 0.3, 0.15, 40.0, 400.0, 0.6, 0.7, 1.2}
 
 
 def code_tokens(path: Path):

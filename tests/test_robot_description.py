@@ -276,7 +276,7 @@ def test_missing_file_and_bad_syntax_are_named(tmp_path):
 
 # -- the described robots --------------------------------------------------------------------------
 def test_the_robots_are_described():
-    assert available() == ["chess", "rpp", "rrp"]
+    assert available() == ["chess", "planar2r", "rpp", "rrp", "rrp_offset"]
 
 
 def test_every_described_robot_loads(robot):
@@ -285,7 +285,7 @@ def test_every_described_robot_loads(robot):
     model = load_model(robot)
     assert isinstance(model, RobotModel) and model.description is description
     assert model.n == len(description.configuration("home")) == len(model.joint_names)
-    assert model.m == len(description.task.coordinates) == 3
+    assert model.m == len(description.task.coordinates) == len(description.task.axes)
     assert load_model(robot) is not model                   # a new instance each call
     assert {"trajectory", "controller", "plant"} <= set(description.blocks)
     assert ("ik" in description.blocks) == (description.ik is not None)
@@ -327,7 +327,8 @@ def test_rpp_home_is_the_bang_bang_start():
 def test_gravity_and_payload():
     for robot in available():
         d = load_description(robot)
-        assert (d.gravity, d.gravity_direction) == (9.81, (0.0, 0.0, -1.0))
+        down = (0.0, -1.0, 0.0) if robot == "planar2r" else (0.0, 0.0, -1.0)   # a vertical x-y plane
+        assert (d.gravity, d.gravity_direction) == (9.81, down)
     chess = load_description("chess")
     assert (chess.payload.mass, chess.payload.frame) == (0.03, "tcp")
     assert load_description("rrp").payload is None and load_description("rpp").payload is None

@@ -5,6 +5,11 @@ block's. A target whose joint rates exceed ``qd_limit`` (default: the URDF's vel
 too close to a singularity and counts as not reachable. Outside the workspace (or at a singularity) ``reachable`` is false, one warning is
 logged per excursion, and the block holds its last valid position with zero velocity and
 acceleration (zeros before it has one).
+
+An iterative solver (Newton-Raphson) starts each communication step from the solution of the
+last completed step (warm start; the first from its ``q_guess``), so that the outputs at a
+communication point depend on the inputs and the state at the step's start only, however often
+they are evaluated. Its diagnostics (``iterations``, ``residual``) are outputs too.
 """
 from __future__ import annotations
 
@@ -29,9 +34,21 @@ class IKBlock(Block):
         except ValueError as exc:
             self.table_error("ik", "solver", str(exc))
         values = self.table_values("ik", self.solver_type.parameters, choice.parameters)
-        for p in self.solver_type.parameters:
-            self.declare_parameter(p, values[p.name])
         robot = self.robot
+        for p in self.solver_type.parameters:
+            if p.size is None:
+                self.declare_parameter(p, values[p.name])
+                continue
+            start = values[p.name]
+            if isinstance(start, str):
+                if start not in self.description.configurations:
+                    self.table_error("ik", p.name, f"no configuration {start!r} (described: "
+                                     f"{', '.join(self.description.configurations)})")
+                start = robot.configuration(start)
+            if len(start) != robot.n:
+                self.table_error("ik", p.name, f"needs {robot.n} values (one per joint), got {len(start)}")
+            self.reals(p.name, robot.n, "parameter", robot.joint_units(0),
+                       lambda i, p=p: f"{p.description}, joint {i}", starts=start)
         self.reals("qd_limit", robot.n, "parameter", robot.joint_units(1),
                    "Joint {i}: the largest rate the IK passes on (default: the URDF's velocity limit); "
                    "a target needing more is too close to a singularity and counts as not reachable",
@@ -53,21 +70,31 @@ class IKBlock(Block):
                               "Joint {i} reference acceleration", depends=xs + xds + xdds)
         self.reachable = self.boolean("reachable", "output", "False while the target lies outside the "
                                       "workspace or at a singularity (last valid solution held)", depends=xs)
+        self.diagnostics = [(d.name, self.real(d.name, "output", d.unit, d.description, depends=xs))
+                            for d in self.solver_type.diagnostics]
         self.last = None          # last valid joint position
+        self.committed = None     # the last valid position at the end of the last completed step
         self.outside = False      # in an excursion (warned once per excursion)
 
     def configure(self):
-        values = {p.name: self.parameter(p.name) for p in self.solver_type.parameters}
+        values = {p.name: self.parameter(p.name) if p.size is None else tuple(self.finite_vector(p.name))
+                  for p in self.solver_type.parameters}
         self.solver = self.solver_type(self.robot, **values)
         self.qd_limit = self.finite_vector("qd_limit", above=0.0)
         self.last = None
+        self.committed = None
         self.outside = False
         super().configure()
 
     def output(self, t):
         v = self.values
+        self.solver.start_from(self.committed)
         try:
-            q, qd, qdd = self.solver.solve(v[self.x], v[self.xd], v[self.xdd])
+            try:
+                q, qd, qdd = self.solver.solve(v[self.x], v[self.xd], v[self.xdd])
+            finally:
+                for name, k in self.diagnostics:
+                    v[k] = self.solver.report[name]
             ratio = np.abs(qd) / self.qd_limit
             fastest = int(np.argmax(ratio))
             if ratio[fastest] > 1.0:
@@ -90,9 +117,17 @@ class IKBlock(Block):
         self.last = q
         v[self.q], v[self.qd], v[self.qdd] = q, qd, qdd
 
+    def advance(self, t, h):
+        self.committed = self.last
+
     def internal_state(self):
-        return {"last": None if self.last is None else [float(x) for x in self.last], "outside": self.outside}
+        return {"last": _listed(self.last), "committed": _listed(self.committed), "outside": self.outside}
 
     def set_internal_state(self, state):
         self.last = None if state["last"] is None else np.array(state["last"])
+        self.committed = None if state["committed"] is None else np.array(state["committed"])
         self.outside = bool(state["outside"])
+
+
+def _listed(q):
+    return None if q is None else [float(x) for x in q]

@@ -98,7 +98,7 @@ class WaypointsBlock(_Reference):
         values = self.table_values("trajectory", self.settings_declared, rest)
         coords, units = _task(self)
         self.string_parameter("waypoints", f"Waypoints ({', '.join(units[0])}), one row per point "
-                              "('x y z'), rows separated by ';'", format_matrix(given["waypoints"]))
+                              f"('{' '.join(coords)}'), rows separated by ';'", format_matrix(given["waypoints"]))
         self.string_parameter("durations", "Duration of each move (s), space-separated; one per leg",
                               format_vector(given["durations"]))
         self.has_grip = "grip_close_after_move" in given

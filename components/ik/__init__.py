@@ -7,7 +7,8 @@ in ``[ik] solver = ...``.
 """
 from __future__ import annotations
 
-from .base import IKSolver, Unreachable, make_solver, solver_class, solvers
+from .base import Diagnostic, IKSolver, Unreachable, make_solver, solver_class, solvers
 from . import closed_form  # noqa: F401  (registers the closed-form solvers)
+from . import newton  # noqa: F401  (registers the Newton-Raphson solver)
 
-__all__ = ["IKSolver", "Unreachable", "make_solver", "solver_class", "solvers"]
+__all__ = ["Diagnostic", "IKSolver", "Unreachable", "make_solver", "solver_class", "solvers"]

@@ -11,6 +11,7 @@ A = [J; C] gives
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -25,12 +26,24 @@ class Unreachable(ValueError):
     """The target lies outside the workspace of the solver's branch, or on a singularity."""
 
 
+@dataclass(frozen=True)
+class Diagnostic:
+    """A number a solver reports about its last solve (the IK block makes it an output)."""
+
+    name: str
+    unit: str
+    description: str
+
+
 class IKSolver:
     """Base of every IK solver.
 
     Subclasses set ``kind`` (the registry name), ``parameters`` (declared
     :class:`~robofmu.components.parameters.Parameter` s) and implement :meth:`position`; a
-    solver that holds extra joint combinations fixed overrides ``constraint_rows``.
+    solver that holds extra joint combinations fixed sets ``constraint_rows`` and
+    ``constraint_values`` (C q = c) in :meth:`setup`. An iterative solver declares
+    ``diagnostics`` (filled in :attr:`report` by every :meth:`position` call, failed or not) and
+    takes its start from :meth:`start_from`.
 
     Parameters
     ----------
@@ -41,6 +54,7 @@ class IKSolver:
 
     kind: ClassVar[str] = ""
     parameters: ClassVar[tuple[Parameter, ...]] = ()
+    diagnostics: ClassVar[tuple[Diagnostic, ...]] = ()
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -60,9 +74,11 @@ class IKSolver:
         except ParameterError as exc:
             raise ValueError(f"IK solver {self.kind!r}: {exc.problem}") from None
         self.constraint_rows = np.zeros((0, robot.n))
+        self.constraint_values = np.zeros(0)
+        self.report: dict[str, float] = {d.name: 0.0 for d in self.diagnostics}
         self.setup()
         rows = robot.m + len(self.constraint_rows)
-        if rows != robot.n:
+        if rows != robot.n or len(self.constraint_values) != len(self.constraint_rows):
             raise ValueError(f"IK solver {self.kind!r}: {robot.m} task coordinates and "
                              f"{len(self.constraint_rows)} constraints for {robot.n} joints")
         self._padding = np.zeros(len(self.constraint_rows))
@@ -73,6 +89,10 @@ class IKSolver:
     def position(self, x: np.ndarray) -> np.ndarray:
         """Joint positions (rad, m), shape (n,), placing the task point at ``x``; raises Unreachable."""
         raise NotImplementedError
+
+    def start_from(self, q: np.ndarray | None) -> None:
+        """Where an iterative solver starts its next solve: ``q`` (a previous solution), or its
+        initial guess if None. Closed-form solvers ignore it."""
 
     def augmented_jacobian(self, q: np.ndarray) -> np.ndarray:
         """A(q) = [J(q); C], shape (n, n)."""

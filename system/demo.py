@@ -6,10 +6,13 @@ knows no robot.
 """
 from __future__ import annotations
 
+import math
 import sys
 import time
 import tomllib
 from pathlib import Path
+
+import numpy as np
 
 from . import plots
 from .analysis import markdown_table
@@ -17,7 +20,7 @@ from .experiment import load
 from .replica import InProcessDiagram
 from .runner import run_experiment
 from .tables import STUDIES_DIR, bangbang_table, compare_with_seed, dynamics_table
-from .units import small
+from .units import printed, small
 
 PLAN = STUDIES_DIR / "demo.toml"
 
@@ -39,16 +42,19 @@ def experiment_section(section: dict, out: Path, fmu_dir) -> tuple[list[str], li
         summary.append([name, f"{m.max_error[worst] * factor:.4f} {unit} (q{worst + 1})",
                         "—" if m.tcp_error is None else f"{m.tcp_error.max() * 1e3:.4f}",
                         ", ".join(f"{v:.3g}" for v in m.peak_effort)])
+    stem = "-".join(section["experiments"][:1])
     if len(runs) > 1:
         roles = next(iter(runs.values())).roles
-        figure = plots.error_comparison({n: r.result for n, r in runs.items()}, roles,
-                                        out / f"{'-'.join(section['experiments'][:1])}-comparison.png",
-                                        section.get("comparison", "Tracking error"))
+        if len({r.roles.robot for r in runs.values()}) == 1:      # joint errors compare on one robot only
+            figure = plots.error_comparison({n: r.result for n, r in runs.items()}, roles,
+                                            out / f"{stem}-comparison.png",
+                                            section.get("comparison", "Tracking error"))
+            lines += [f"![comparison]({figure.name})", ""]
         tcp = {n: (r.result.time, r.metrics.tcp_error) for n, r in runs.items() if r.metrics.tcp_error is not None}
-        lines += [f"![comparison]({figure.name})", ""]
         if tcp:
-            tcp_figure = plots.tcp_error(tcp, out / f"{'-'.join(section['experiments'][:1])}-task-error.png")
+            tcp_figure = plots.tcp_error(tcp, out / f"{stem}-task-error.png")
             lines += [f"![task-point error]({tcp_figure.name})", ""]
+    lines += diagnostics_lines(section, runs, out / f"{stem}-iterations.png", fmu_dir)
     for name, run in runs.items():
         lines += [run.section.replace("### ", "### "), "",
                   *[f"![{p.stem}]({name}/{p.name})" for p in run.figures], ""]
@@ -67,7 +73,75 @@ def experiment_section(section: dict, out: Path, fmu_dir) -> tuple[list[str], li
         if "seed_dynamics" in section:
             text, _ = dynamics_table(run.roles.robot, STUDIES_DIR / section["seed_dynamics"])
             lines += ["#### Dynamics beside the seed's Lagrange derivation", "", text, ""]
+    if "tutorial" in section:
+        lines += tutorial_lines(section, out)
     return lines, summary
+
+
+def _parameter(system, instance: str, name: str):
+    """A block parameter of an experiment: its value in the experiment, else its FMU's start value."""
+    spec = next((b for b in system.blocks if b.name == instance), None)
+    if spec is None:
+        return None
+    if name in spec.parameters:
+        return spec.parameters[name]
+    from fmpy import read_model_description
+
+    from .check import start_values
+
+    return start_values(read_model_description(str(system.fmu_path(spec)), validate=False)).get(name)
+
+
+def diagnostics_lines(section: dict, runs: dict, path: Path, fmu_dir) -> list[str]:
+    """The iterative solvers' diagnostics the runs recorded (``<instance>.iterations``,
+    ``<instance>.residual``): a figure along the runs and a table; nothing if no run has any."""
+    recorded = {name: plots.solver_diagnostics(run.result) for name, run in runs.items()}
+    recorded = {name: found for name, found in recorded.items() if found}
+    if not recorded:
+        return []
+    tolerances = {}
+    rows = []
+    for name, found in recorded.items():
+        system = load(name, fmu_dir=fmu_dir)
+        for instance, signals in found.items():
+            tolerance = _parameter(system, instance, "tolerance")
+            if tolerance is not None:
+                tolerances.setdefault(name, float(tolerance))
+            it = signals.get("iterations")
+            res = signals.get("residual")
+            counts = ", ".join(f"{k}: {c}" for k, c in enumerate(np.bincount(it.astype(int))) if c) \
+                if it is not None else "—"
+            unit = printed(runs[name].result.units.get(f"{instance}.residual"))
+            unit = f" {unit}" if unit else ""
+            rows.append([name, instance, "—" if it is None else f"{it[0]:.0f}",
+                         "—" if it is None or len(it) < 2 else f"{it[1:].max():.0f}", counts,
+                         "—" if res is None else f"{res.max():.2e}{unit}",
+                         "—" if tolerance is None else f"{float(tolerance):g}{unit}"])
+    title = section.get("diagnostics", "Iterations of the IK solver per communication step along the run")
+    figure = plots.iterations({n: runs[n].result for n in recorded}, path, title, tolerances)
+    return [f"### {title}", "", markdown_table(rows, [
+        "experiment", "instance", "iterations at t = 0", "max iterations per step after t = 0",
+        "communication points by iterations", "max residual", "tolerance"]), "",
+        f"![iterations]({figure.name})", ""]
+
+
+def tutorial_lines(section: dict, out: Path) -> list[str]:
+    """A worked-example study (:mod:`robofmu.system.newton_study`) as report tables and a figure of
+    the residual against the iteration."""
+    from . import newton_study
+
+    path = STUDIES_DIR / section["tutorial"]
+    _say(f"worked examples: {path.name}")
+    examples = newton_study.run_study(path)
+    tolerances = {float(e.spec.get("solver", {}).get("tolerance", math.nan)) for e in examples}
+    tolerance = tolerances.pop() if len(tolerances) == 1 else None
+    figure = plots.residual_history({e.spec.get("name", e.robot): [i.residual for i in e.iterates]
+                                     for e in examples}, out / f"{path.stem}-residuals.png",
+                                    section.get("tutorial_figure", "Residual per Newton-Raphson iteration"),
+                                    tolerance if tolerance is not None and math.isfinite(tolerance) else None)
+    title = section.get("tutorial_title", "Worked examples")
+    return [f"### {title}", "", *newton_study.report(path, examples, level=4),
+            f"![residual per iteration]({figure.name})", ""]
 
 
 def accuracy_section(plan: dict, out: Path, fmu_dir, quick: bool) -> list[str]:

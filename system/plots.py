@@ -18,6 +18,8 @@ from .roles import Roles  # noqa: E402
 from .units import printed, small  # noqa: E402
 
 COLORS = ["tab:red", "tab:green", "tab:blue", "k", "tab:orange", "tab:purple"]
+#: The iterative IK solvers' diagnostics a run may record as outputs ``<instance>.<name>``.
+DIAGNOSTICS = ("iterations", "residual")
 
 
 def _save(fig, path: Path) -> Path:
@@ -154,6 +156,91 @@ def tcp_error(results: dict[str, tuple[np.ndarray, np.ndarray]], path: Path) -> 
     ax.set_ylabel("task-point error (mm)")
     ax.set_title("Task-point error |FK(q) - x_ref| against the reference")
     ax.legend(fontsize=8, ncol=3)
+    ax.grid(alpha=0.3, which="both")
+    return _save(fig, path)
+
+
+def solver_diagnostics(result: Result) -> dict[str, dict[str, np.ndarray]]:
+    """The recorded diagnostics of iterative solvers: instance -> {name: signal} for every scalar
+    output ``<instance>.iterations`` / ``<instance>.residual`` (:data:`DIAGNOSTICS`) of the run."""
+    found: dict[str, dict[str, np.ndarray]] = {}
+    for column in result.columns:
+        instance, _, name = column.partition(".")
+        if name in DIAGNOSTICS:
+            found.setdefault(instance, {})[name] = result[column]
+    return found
+
+
+def iterations(results: dict[str, Result], path: Path, title: str,
+               tolerances: dict[str, float] | None = None) -> Path | None:
+    """Iterations of an iterative solver per communication point along each run (top) and the
+    residual it ended with (bottom, log scale; a residual of exactly 0 is drawn at the panel's
+    floor), one column per run; ``tolerances`` (run -> tolerance) draws the solver's tolerance.
+    Runs without recorded diagnostics are left out; None if no run has any."""
+    runs = {name: (r, solver_diagnostics(r)) for name, r in results.items()}
+    runs = {name: (r, d) for name, (r, d) in runs.items() if d}
+    if not runs:
+        return None
+    fig, axes = plt.subplots(2, len(runs), figsize=(4.8 * len(runs) + 1.0, 5.6), sharey="row", squeeze=False)
+    residuals = [s["residual"] for _, d in runs.values() for s in d.values() if "residual" in s]
+    positive = [float(r[r > 0].min()) for r in residuals if np.any(r > 0)]
+    tiny = 10.0 ** np.floor(np.log10(min(positive, default=1e-16))) / 10.0
+    units = {printed(r.units.get(f"{i}.residual")) for r, d in runs.values() for i in d if "residual" in d[i]}
+    counts = [float(s["iterations"].max()) for _, d in runs.values() for s in d.values() if "iterations" in s]
+    top_limit = max(counts, default=1.0)
+    for col, (name, (result, diagnostics)) in enumerate(runs.items()):
+        top, bottom = axes[0, col], axes[1, col]
+        for k, (instance, signals) in enumerate(diagnostics.items()):
+            color = COLORS[(k + 2) % len(COLORS)]
+            prefix = f"{instance}: " if len(diagnostics) > 1 else ""
+            if "iterations" in signals:
+                it = signals["iterations"]
+                after = it[1:] if len(it) > 1 else it
+                top.step(result.time, it, where="post", color=color, lw=1,
+                         label=f"{prefix}first point {it[0]:.0f}, then at most {after.max():.0f} "
+                               f"(mean {after.mean():.2f})")
+            if "residual" in signals:
+                res = signals["residual"]
+                bottom.semilogy(result.time[res > 0], res[res > 0], ".", color=color, ms=2,
+                                label=f"{prefix}max {res.max():.2g}")
+                if np.any(res == 0):
+                    bottom.semilogy(result.time[res == 0], np.full(int(np.sum(res == 0)), tiny), "|",
+                                    color=color, ms=4, label=f"{prefix}exactly 0 (drawn at {tiny:.0e})")
+        tolerance = (tolerances or {}).get(name)
+        if tolerance is not None:
+            bottom.axhline(tolerance, color="0.3", ls=":", label=f"tolerance {tolerance:g}")
+        top.set_ylim(-0.25, top_limit + 1.0)
+        top.legend(fontsize=8, loc="upper right")
+        bottom.legend(fontsize=7, loc="lower center", ncol=3)
+        top.set_title(name, fontsize=10)
+        top.grid(alpha=0.3)
+        bottom.grid(alpha=0.3, which="both")
+        bottom.set_xlabel("time (s)")
+    axes[0, 0].set_ylabel("iterations per step")
+    axes[0, 0].yaxis.get_major_locator().set_params(integer=True)
+    unit = ", ".join(sorted(u for u in units if u))
+    axes[1, 0].set_ylabel(f"residual |F|{f' ({unit})' if unit else ''}")
+    axes[1, 0].set_ylim(tiny / 100.0, axes[1, 0].get_ylim()[1])
+    fig.suptitle(title, fontsize=11)
+    return _save(fig, path)
+
+
+def residual_history(histories: dict[str, list[float]], path: Path, title: str,
+                     tolerance: float | None = None) -> Path:
+    """Residual |F_k| against the iteration k of iterative solves (log scale), one line per solve;
+    where the convergence is quadratic the exponent roughly doubles from one iteration to the next."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for k, (name, residuals) in enumerate(histories.items()):
+        r = np.asarray(residuals, dtype=float)
+        ax.semilogy(np.arange(len(r)), np.where(r > 0, r, np.nan), "o-", color=COLORS[k % len(COLORS)],
+                    lw=1, ms=4, label=name)
+    if tolerance is not None:
+        ax.axhline(tolerance, color="0.3", ls=":", label=f"tolerance {tolerance:g}")
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.set_xlabel("iteration k")
+    ax.set_ylabel("residual |F_k|")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, loc="lower left")
     ax.grid(alpha=0.3, which="both")
     return _save(fig, path)
 

@@ -77,7 +77,8 @@ class Run:
 
 
 def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]) -> list[Path]:
-    """The figures of one run: block diagram, references, tracking, efforts."""
+    """The figures of one run: block diagram, references, tracking, efforts, and the iterations of
+    an iterative solver where the run recorded some."""
     from . import plots
 
     made = [plots.block_diagram(system, out / "block_diagram.png", order)]
@@ -86,6 +87,9 @@ def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]
     made += [plots.joint_reference(result, roles, out / "joint_reference.png"),
              plots.tracking(result, roles, out / "tracking.png", system.name),
              plots.efforts(result, roles, out / "efforts.png", system.name)]
+    solver = plots.iterations({system.name: result}, out / "iterations.png", system.name)
+    if solver is not None:                         # an iterative solver's recorded diagnostics
+        made.append(solver)
     return made
 
 

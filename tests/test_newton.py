@@ -42,6 +42,11 @@ def test_planar2r_example_converges_in_four_iterations():
     assert solver.report["iterations"] == 4 and len(solver.history) == 5
     assert solver.report["residual"] < 1e-12
     np.testing.assert_allclose(planar_fk([q[0], q[0] + q[1]]), [1.2, 0.6], atol=1e-12)
+    np.testing.assert_array_equal(solver.iterates[0], [0.0, 1.0])
+    np.testing.assert_array_equal(solver.iterates[-1], q)
+    for q_k, r_k in zip(solver.iterates, solver.history):        # each |F_k| is that of q_k
+        a = [q_k[0], q_k[0] + q_k[1]]
+        assert np.linalg.norm(planar_fk(a) - [1.2, 0.6]) == pytest.approx(r_k, rel=1e-9, abs=1e-15)
 
 
 def test_rrp_offset_example_converges_in_five_iterations():

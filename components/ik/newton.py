@@ -123,7 +123,8 @@ class NewtonRaphsonIK(IKSolver):
             raise ValueError(f"IK solver {self.kind!r}: q_guess = {self.q_guess.tolist()} lies outside "
                              "the joint limits")
         self.start = self.q_guess.copy()
-        self.history: list[float] = []          # |F| per iteration of the last solve
+        self.history: list[float] = []          # |F| per iteration of the last solve (0: the start)
+        self.iterates: list[np.ndarray] = []    # q per iteration of the last solve (0: the start)
 
     def start_from(self, q):
         self.start = self.q_guess.copy() if q is None else np.array(q, dtype=float)
@@ -138,6 +139,7 @@ class NewtonRaphsonIK(IKSolver):
         F = self.residual(q, x)
         r = r0 = float(np.linalg.norm(F))
         self.history = [r]
+        self.iterates = [q]
         iterations = 0
         try:
             while not r <= self.tolerance:
@@ -162,6 +164,7 @@ class NewtonRaphsonIK(IKSolver):
                     r = float(np.linalg.norm(F))
                 iterations += 1
                 self.history.append(r)
+                self.iterates.append(q)
             if not self._within(q):
                 raise Unreachable(f"the solution q = {_show(q)} lies outside the joint limits")
             condition = np.linalg.cond(self.augmented_jacobian(q))

@@ -138,8 +138,8 @@ def plain_divergence_guess():
 def test_plain_method_diverges_where_the_damped_method_converges():
     target = np.array([0.6, 0.5])
     plain = NewtonRaphson(load_model("planar2r"), q_guess=plain_divergence_guess(), step_control="none")
-    with pytest.raises(Unreachable, match=r"(diverges|did not converge)"):
-        plain.position(target)
+    with pytest.raises(Unreachable, match=r"Newton-Raphson diverges from q = \[0.0, 0.0001\]: after 1 iterations"):
+        plain.position(target)                         # the first step throws q far beyond the limits
     guarded = NewtonRaphson(load_model("planar2r"), q_guess=plain_divergence_guess())
     q = guarded.position(target)
     np.testing.assert_allclose(planar_fk([q[0], q[0] + q[1]]), target, atol=1e-12)
@@ -275,3 +275,15 @@ def test_newton_raphson_agrees_with_the_closed_form_along_the_task(robot, closed
         previous = q
     assert worst < 1e-10
     assert most <= 3
+
+
+def test_block_with_the_plain_method_reports_divergence_from_a_bad_guess():
+    """The tutorial's plain method from a start next to the stretched singularity: reachable
+    false, the warning names the divergence, and with no valid solution yet the block outputs
+    zeros and says so."""
+    block = ik_block("planar2r", step_control="none", q_guess=plain_divergence_guess())
+    q, reachable = feed(block, (0.6, 0.5), 0.0)
+    assert not reachable
+    np.testing.assert_array_equal(q, [0.0, 0.0])
+    (level, text), = block.messages
+    assert level == "warning" and "diverges" in text and "no valid solution yet: outputs zero" in text

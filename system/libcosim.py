@@ -38,12 +38,22 @@ unloaded (it defines C++ ``STB_GNU_UNIQUE`` symbols, which makes it ``NODELETE``
 process that ever instantiated a pythonfmu FMU, with fmpy or libcosim, writes into freed heap
 memory while it exits. Mostly harmless, sometimes fatal: "corrupted double-linked list"
 (SIGABRT) or a segfault after the script's last line, more often the more the process did
-(two ``simulate_ssp`` or libcosim runs). :func:`guard_pythonfmu_exit` (called by every
-:class:`CosimRun` and by :func:`robofmu.system.ssp.run_ssp_fmpy`) registers
-:func:`release_pythonfmu_states` to run at interpreter exit: it calls the hook's body, the
-exported ``finalizePythonInterpreter``, of every pythonfmu library still loaded, which empties
-the pointer before either hook runs (both then do nothing). In a Python host the state is only
-a finished thread; the call touches no Python object.
+(two ``simulate_ssp`` or libcosim runs). The cure is to call the hook's body, the exported
+``finalizePythonInterpreter``, before the C++ destructor: it empties the pointer, and both hooks
+then do nothing. robofmu's FMUs do it themselves, in any host: as robofmu's export library
+(system/fmi_export/robofmu_fmi2.c, point 3) loads pythonfmu's, it registers that library's
+``finalizePythonInterpreter`` as an exit handler owned by it (``__cxa_atexit`` with its
+``__dso_handle``), which ``exit()`` runs before the library's destructors, and its unloading
+after its hook, so a script using fmpy or libcosimpy without robofmu exits cleanly too. In a
+Python host that handler runs after ``Py_Finalize``, harmlessly: the state is only a thread that
+ended as it was made (``Py_Initialize`` had been called already), and its release calls nothing
+of Python. In a host that is not Python it finalizes the interpreter pythonfmu started, at the
+point of ``exit()`` where pythonfmu's destructor would have. For other pythonfmu 0.7.0 FMUs
+(without robofmu's export library, or robofmu's built before it had this), there is
+:func:`guard_pythonfmu_exit` (called by every :class:`CosimRun` and by
+:func:`robofmu.system.ssp.run_ssp_fmpy`, harmless beside the FMUs' own handler): it registers
+:func:`release_pythonfmu_states` to run at interpreter exit, which calls the
+``finalizePythonInterpreter`` of every pythonfmu library still loaded.
 """
 from __future__ import annotations
 
@@ -174,8 +184,9 @@ def guard_pythonfmu_exit() -> None:
 
     Python runs atexit handlers before the C library's exit handlers, so the release comes
     before pythonfmu's destructors. Called by every :class:`CosimRun` and by
-    :func:`robofmu.system.ssp.run_ssp_fmpy`; call it yourself when you run robofmu (or any
-    pythonfmu 0.7.0) FMUs with fmpy or libcosimpy directly.
+    :func:`robofmu.system.ssp.run_ssp_fmpy`. robofmu's FMUs need it nowhere (their export
+    library releases the state itself, see the module notes); call it yourself when you run
+    other pythonfmu 0.7.0 FMUs with fmpy or libcosimpy directly.
     """
     global _exit_guard_registered
     if not _exit_guard_registered:

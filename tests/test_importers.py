@@ -14,11 +14,16 @@ rrp-line, rpp-bangbang), so it also mixes the robots' FMUs in one process. What 
   decrements a counter in the freed control block. Found with valgrind ("Invalid read of size
   4 at finalizePythonInterpreter ... inside a block of size 128 free'd"); it shows as "corrupted
   double-linked list" (SIGABRT) or a segfault after the script's last line, in a few percent of
-  the processes that ran two simulations. The runners (``run_ssp_fmpy``, ``CosimRun``) register
-  ``guard_pythonfmu_exit``, which releases that state at interpreter exit, before either hook.
-  Every child here checks, from an atexit handler registered first (so it runs last), the
-  static pointer of every pythonfmu library still loaded: empty, or the write would come
-  (``PYSTATE loaded held``; offsets from the symbol table of pythonfmu's library).
+  the processes that ran two simulations. Fixed in robofmu's export library
+  (system/fmi_export/robofmu_fmi2.c, point 3): it registers pythonfmu's
+  ``finalizePythonInterpreter`` as an exit handler owned by pythonfmu's library, which ``exit()``
+  runs (after the interpreter's finalization) before that library's destructors; a script that
+  imports nothing of robofmu exits cleanly too. The runners (``run_ssp_fmpy``, ``CosimRun``)
+  also register ``guard_pythonfmu_exit`` (for other pythonfmu FMUs), which releases that state
+  earlier, at interpreter exit. Every child here checks, from an atexit handler registered first
+  (so it runs last of Python's), the static pointer of every pythonfmu library still loaded:
+  empty where the guard ran (``PYSTATE loaded held``; offsets from the symbol table of
+  pythonfmu's library); the FMUs' own handler comes after, in the C library's ``exit()``.
 
 The results are the master's: libcosim equals its Jacobi run to rounding (1e-12 of each
 column's range, as tests/test_ssp.py), fmpy.ssp equals it but for its start-up (no exchange at
@@ -556,9 +561,12 @@ def test_user_scripts_without_robofmu_run_twice(children, packages, jacobi):
     from the first package's extraction folder, deleted after the first run. Results equal the
     runners' (fmpy) and the master's Jacobi run (libcosim).
 
-    Such a script has no exit guard: pythonfmu's write into freed memory at exit stays (usually
-    harmless, now and then an abort after the last line), unless the FMUs' own export library
-    releases the state before exit (then its binary names finalizePythonInterpreter)."""
+    Such a script has no exit guard of robofmu's Python side: its pythonfmu libraries still hold
+    their state when Python's atexit handlers run (``held`` is not checked). robofmu's export
+    library releases it in the C library's ``exit()``, before pythonfmu's destructors (its
+    binary names finalizePythonInterpreter), so the child must exit cleanly; FMUs without that
+    (built before it) keep pythonfmu's write into freed memory at exit, usually harmless, now
+    and then an abort after the last line (xfail)."""
     child = children["plain"].finish()
     runner = children["fmpy"].finish()
     for name in EXPERIMENTS:

@@ -3,7 +3,8 @@
    Every robofmu FMU carries, in binaries/linux64/, this library as <modelIdentifier>.so and
    pythonfmu 0.7.0's own export library, unchanged, as libpythonfmu-export.so. The importer
    loads this one; it loads pythonfmu's from its own folder and forwards every FMI function to
-   it, changing two things (robofmu.system.fmi_export explains why; docs/design.md too):
+   it, changing two things (robofmu.system.fmi_export explains why; docs/design.md too) and
+   guarding against a third (point 3):
 
    1. Statuses. A message the Python slave logs with the category "robofmu:status" makes the
       FMI call during which it is logged return at least the message's status (fmi2Error for a
@@ -16,15 +17,38 @@
       importer's logger; fmi2OK messages only while loggingOn (fmi2Instantiate or
       fmi2SetDebugLogging) is true and, if categories were set, their category is one of them
       (or "logAll" is). A '%' in a message is doubled: the logger takes it as a format.
+   3. Process exit. pythonfmu keeps its Python state in a static std::shared_ptr released by two
+      hooks: its C++ destructor (run by exit() among the exit handlers) and its unload hook (run
+      after them by exit(), first by dlclose). At exit() the destructor frees the state without
+      emptying the pointer, and the hook then writes into the freed block (system/libcosim.py,
+      "Process exit"). So, as it loads pythonfmu's library, this layer registers pythonfmu's own
+      finalizePythonInterpreter (the hook's body: it empties the pointer, releasing the state)
+      as an exit handler owned by that library (__cxa_atexit with the library's __dso_handle,
+      read from its symbol table). exit() runs it before the library's C++ destructors, which
+      were registered as it loaded; both hooks then find nothing to release. Unloading the
+      library runs it after the hook (nothing left) and drops it. The state lives as long as
+      without this layer, only its release at exit comes first: in a Python host it is a thread
+      that ended when the state was made, released after Py_Finalize without any call into
+      Python; in a host that is not Python it is the interpreter pythonfmu started, finalized
+      there as pythonfmu's destructor would have. (Releasing it when this library unloads
+      would finalize that interpreter while the process still needs it: the first copy of
+      pythonfmu's library loaded in a process never unloads, and the next FMU would start a
+      second interpreter, in which numpy cannot be imported again.)
 
    Everything else is pythonfmu's, fmi2Fatal after a Python exception included (robofmu's
    slave lets none reach it: it fails calls through point 1). Nothing here uses Python's API. */
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <elf.h>
+#include <fcntl.h>
+#include <link.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #define EXPORT __attribute__((visibility("default")))
 #define STOCK_LIBRARY "libpythonfmu-export.so"
@@ -110,6 +134,80 @@ static struct {
 static void* stock_handle = NULL;
 static char load_error[8192] = "not loaded";
 
+/* -- pythonfmu's state at process exit (point 3 of the header comment) ------------------------ */
+extern int __cxa_atexit(void (*function)(void*), void* argument, void* dso_handle);
+
+/* In the ELF file image (data, size) of a library loaded with load bias `bias`: the address of
+   its __dso_handle (a local symbol, in the symbol table only), or NULL. Checked as crtbeginS.o
+   defines it in a shared library: in a writable loaded segment, holding its own address. */
+static void* find_dso_handle(const unsigned char* data, size_t size, ElfW(Addr) bias)
+{
+#define INSIDE(offset, length) ((offset) <= size && (length) <= size - (offset))
+    const Elf64_Ehdr* eh = (const Elf64_Ehdr*)data;
+    if (size < sizeof *eh || memcmp(eh->e_ident, ELFMAG, SELFMAG) != 0
+        || eh->e_ident[EI_CLASS] != ELFCLASS64 || eh->e_ident[EI_DATA] != ELFDATA2LSB
+        || eh->e_shentsize != sizeof(Elf64_Shdr) || eh->e_phentsize != sizeof(Elf64_Phdr)
+        || !INSIDE(eh->e_shoff, (size_t)eh->e_shnum * sizeof(Elf64_Shdr))
+        || !INSIDE(eh->e_phoff, (size_t)eh->e_phnum * sizeof(Elf64_Phdr)))
+        return NULL;
+    const Elf64_Shdr* sections = (const Elf64_Shdr*)(data + eh->e_shoff);
+    const Elf64_Phdr* segments = (const Elf64_Phdr*)(data + eh->e_phoff);
+    static const char name[] = "__dso_handle";
+    for (size_t k = 0; k < eh->e_shnum; ++k) {
+        const Elf64_Shdr* table = &sections[k];
+        if (table->sh_type != SHT_SYMTAB || table->sh_entsize != sizeof(Elf64_Sym)
+            || table->sh_link >= eh->e_shnum || !INSIDE(table->sh_offset, table->sh_size))
+            continue;
+        const Elf64_Shdr* names = &sections[table->sh_link];
+        if (!INSIDE(names->sh_offset, names->sh_size)) continue;
+        const Elf64_Sym* symbols = (const Elf64_Sym*)(data + table->sh_offset);
+        for (size_t j = 0; j < table->sh_size / sizeof(Elf64_Sym); ++j) {
+            const Elf64_Sym* sym = &symbols[j];
+            if (ELF64_ST_TYPE(sym->st_info) != STT_OBJECT || sym->st_shndx == SHN_UNDEF
+                || sym->st_name >= names->sh_size || names->sh_size - sym->st_name < sizeof name
+                || memcmp(data + names->sh_offset + sym->st_name, name, sizeof name) != 0)
+                continue;
+            for (size_t m = 0; m < eh->e_phnum; ++m) {
+                const Elf64_Phdr* seg = &segments[m];
+                if (seg->p_type == PT_LOAD && (seg->p_flags & PF_W) && sym->st_value >= seg->p_vaddr
+                    && sym->st_value + sizeof(void*) <= seg->p_vaddr + seg->p_memsz) {
+                    void* where = (void*)(bias + sym->st_value);
+                    return *(void* const*)where == where ? where : NULL;
+                }
+            }
+            return NULL;
+        }
+    }
+    return NULL;
+#undef INSIDE
+}
+
+/* Have pythonfmu's finalizePythonInterpreter, of its library just loaded from path as handle,
+   called by exit() before that library's C++ destructors, or as the library unloads. */
+static void guard_stock_exit(void* handle, const char* path)
+{
+    void (*finalize)(void*);   /* it is void (void): see below */
+    *(void**)(&finalize) = dlsym(handle, "finalizePythonInterpreter");
+    struct link_map* map = NULL;
+    if (finalize == NULL || dlinfo(handle, RTLD_DI_LINKMAP, &map) != 0 || map == NULL) return;
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return;
+    struct stat st;
+    void* data = MAP_FAILED;
+    if (fstat(fd, &st) == 0 && st.st_size > 0)
+        data = mmap(NULL, (size_t)st.st_size, PROT_READ, MAP_PRIVATE, fd, 0);
+    close(fd);
+    if (data == MAP_FAILED) return;
+    void* dso = find_dso_handle(data, (size_t)st.st_size, map->l_addr);
+    munmap(data, (size_t)st.st_size);
+    /* Registered with pythonfmu's library as its owner: exit() runs it (the handlers in reverse
+       order of registration: before that library's C++ destructors, registered as it loaded);
+       so does that library's own unloading (__cxa_finalize), after its unload hook, and then
+       forgets it. Never run from this library, which may unload first. The function takes no
+       argument: called with one, which the x86-64 calling convention lets it ignore. */
+    if (dso != NULL) __cxa_atexit(finalize, NULL, dso);
+}
+
 __attribute__((constructor)) static void load_stock(void)
 {
     Dl_info self;
@@ -141,6 +239,7 @@ __attribute__((constructor)) static void load_stock(void)
     }
     STOCK_FUNCTIONS(RESOLVE)
 #undef RESOLVE
+    guard_stock_exit(handle, path);
     stock_handle = handle;
     load_error[0] = '\0';
 }

@@ -108,7 +108,8 @@ def test_description_holds_the_specifications_numbers():
     assert d.task.coordinates == ("x", "y", "theta") and d.task.frame == "end_effector"
     assert (d.gain_set("pd").kp, d.gain_set("pd").kd, d.gain_set("pd").ki) == (400.0, 40.0, 0.0)
     assert d.ik.kind == "planar_3rrp" and d.ik.parameters == {"branch": "+++"}
-    assert d.trajectory is None                 # no trajectory block yet (the circle profile is to come)
+    assert d.trajectory.kind == "circle"        # 3rrp-circle (robots.md section 5)
+    assert d.blocks == ("trajectory", "ik", "controller", "plant", "fk", "jacobian")
 
 
 def test_model_interface_units_and_limits(model):

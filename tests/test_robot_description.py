@@ -327,9 +327,9 @@ def test_a_link_without_inertia_about_o_is_refused(copy_robot):
 
 
 def test_a_trajectory_table_needs_a_trajectory_block_and_the_other_way_round(copy_robot):
-    path = copy_robot("3rrp", lambda d: set_key(d, "trajectory", {"profile": "waypoints"}))
+    path = copy_robot("3rrp", lambda d: set_key(d, "blocks", ["ik", "controller", "plant", "fk"]))
     assert "a [trajectory] table is needed exactly when `blocks` lists 'trajectory'" in refusal(path, "trajectory")
-    path = copy_robot("3rrp", lambda d: set_key(d, "blocks", ["trajectory", "ik", "controller", "fk"]))
+    path = copy_robot("3rrp", lambda d: d.pop("trajectory"))
     assert refusal(path, "trajectory").endswith("trajectory: missing")
 
 

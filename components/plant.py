@@ -57,16 +57,25 @@ class Plant:
         """Kinetic plus potential energy (J), payload included."""
         return self.robot.kinetic_energy(self.q, self.qd) + self.robot.potential_energy(self.q)
 
-    def step(self, tau: np.ndarray, h: float, t: float = 0.0) -> np.ndarray:
-        """Advance the state by ``h`` seconds with ``tau`` held; returns the new state (q, qd).
+    def acceleration(self, x: np.ndarray, tau: np.ndarray, f_ext: np.ndarray | None = None) -> np.ndarray:
+        """qdd at state ``x`` = (q, qd) under ``tau`` and, for a model that takes one (it has
+        ``wrench_torque``), the end-effector wrench ``f_ext`` (None: no wrench argument)."""
+        n = self.n
+        if f_ext is None:
+            return self.robot.forward_dynamics(x[:n], x[n:], tau)
+        return self.robot.forward_dynamics(x[:n], x[n:], tau, f_ext)
+
+    def step(self, tau: np.ndarray, h: float, t: float = 0.0, f_ext: np.ndarray | None = None) -> np.ndarray:
+        """Advance the state by ``h`` seconds with ``tau`` (and the end-effector wrench ``f_ext``,
+        where the model takes one) held; returns the new state (q, qd).
 
         Raises PlantDiverged naming the joint and the time if the state turns non-finite; the
         state is then left as it was before the step.
         """
-        n, robot = self.n, self.robot
+        n = self.n
 
         def f(x):
-            return np.concatenate([x[n:], robot.forward_dynamics(x[:n], x[n:], tau)])
+            return np.concatenate([x[n:], self.acceleration(x, tau, f_ext)])
 
         with np.errstate(all="ignore"):
             x = rk4(f, self.x, h, self.max_substep)

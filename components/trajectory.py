@@ -1,5 +1,6 @@
 """Trajectory profiles: LSPB through waypoints, a straight line with a trapezoidal speed profile,
-and a synchronized minimum-time bang-bang in joint space.
+a synchronized minimum-time bang-bang in joint space, and a task-space circle run once with an
+LSPB phase.
 
 Every profile has ``dim``, ``duration``, ``breakpoints`` (the instants where its acceleration
 jumps) and ``evaluate(t, snap=True) -> (x, xd, xdd)``; it rests at its start before 0 and at its
@@ -308,3 +309,78 @@ class SynchronizedBangBang:
             return self.q_start + 0.5 * a * t * t, a * t, a.copy()
         r = self.duration - t
         return self.q_end - 0.5 * a * r * r, a * r, -a
+
+
+class Circle:
+    """Once round a circle in the first two task coordinates, the phase phi(t) by LSPB.
+
+    phi runs from 0 to 2 pi in ``duration`` by LSPB (cruise speed ``cruise_factor`` x the mean
+    speed), at rest at both ends. The point is
+
+        p(phi) = center + radius (cos psi, sin psi),  psi = start_angle + sense phi,
+
+    (``sense`` +1 counter-clockwise, -1 clockwise), and every further task coordinate k is
+    offset[k] + amplitude[k] sin phi. Velocity and acceleration are the exact derivatives:
+    pd = radius sense phid (-sin psi, cos psi), pdd = radius sense phidd (-sin psi, cos psi)
+    - radius phid^2 (cos psi, sin psi); the k-th extra one amplitude[k] (cos phi phid) and
+    amplitude[k] (cos phi phidd - sin phi phid^2). Before 0 and from ``duration`` on it rests at
+    the start point (phi = 0, the same as phi = 2 pi).
+
+    Parameters
+    ----------
+    center : array_like, shape (2,)
+        Centre in the first two task coordinates.
+    radius : float
+        > 0, in their unit.
+    start_angle : float
+        psi at phi = 0 (rad): the start point's direction from the centre.
+    sense : {1, -1}
+    duration : float
+        > 0 (s).
+    cruise_factor : float
+        In (1, 2].
+    offset, amplitude : array_like, shape (m - 2,)
+        The extra task coordinates' offset and sin-phi amplitude (empty for m = 2).
+    """
+
+    def __init__(self, center, radius: float, start_angle: float, sense: int, duration: float,
+                 cruise_factor: float = 1.5, offset=(), amplitude=()):
+        self.center = _finite_vector(center, "center", 2)
+        self.radius = _positive(radius, "radius", "m")
+        self.start_angle = float(start_angle)
+        if not np.isfinite(self.start_angle):
+            raise ValueError(f"start_angle: must be finite, got {start_angle}")
+        if sense not in (1, -1):
+            raise ValueError(f"sense: must be 1 (counter-clockwise) or -1 (clockwise), got {sense}")
+        self.sense = int(sense)
+        self.duration = _positive(duration, "duration", "s")
+        if not (1.0 < cruise_factor <= 2.0):
+            raise ValueError(f"cruise_factor: must lie in (1, 2], got {cruise_factor}")
+        self.cruise_factor = float(cruise_factor)
+        self.offset = _finite_vector(np.asarray(offset, dtype=float).reshape(-1), "offset")
+        self.amplitude = _finite_vector(np.asarray(amplitude, dtype=float).reshape(-1), "amplitude",
+                                        len(self.offset))
+        self.dim = 2 + len(self.offset)
+        tb = self.duration * (1.0 - 1.0 / self.cruise_factor)
+        self.breakpoints = np.unique([0.0, tb, self.duration - tb, self.duration])
+
+    def phase(self, t: float) -> tuple[float, float, float]:
+        """phi (rad), phid (rad/s), phidd (rad/s^2) at ``t``: LSPB from 0 to 2 pi, at rest outside."""
+        if t < 0.0 or t >= self.duration:
+            return (0.0 if t < 0.0 else 2.0 * np.pi), 0.0, 0.0
+        p, v, a = lspb(np.zeros(1), np.full(1, 2.0 * np.pi), self.duration, t, self.cruise_factor)
+        return float(p[0]), float(v[0]), float(a[0])
+
+    def evaluate(self, t: float, snap: bool = True):
+        """Position, velocity and acceleration (task units) at ``t``, each shape (dim,)."""
+        if snap:
+            t = snap_to(self.breakpoints, t)
+        phi, w, alpha = self.phase(t)
+        psi = self.start_angle + self.sense * phi
+        c, s = np.cos(psi), np.sin(psi)
+        r, k = self.radius, self.sense
+        x = np.concatenate([self.center + r * np.array([c, s]), self.offset + self.amplitude * np.sin(phi)])
+        xd = np.concatenate([r * k * w * np.array([-s, c]), self.amplitude * np.cos(phi) * w])
+        xdd = np.concatenate([r * k * alpha * np.array([-s, c]) - r * w * w * np.array([c, s]),
+                              self.amplitude * (np.cos(phi) * alpha - np.sin(phi) * w * w)])
+        return x, xd, xdd

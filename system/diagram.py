@@ -12,17 +12,19 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-_INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
+_INDEXED = re.compile(r"^(.*)\[(\d+(?:,\d+)*)\]$")       # q[2]; a matrix entry J[1,2]
 _WIRE = re.compile(r"^\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*->\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*$")
 
 
 def expand(names, base: str) -> list[str]:
     """The variables ``base`` names among ``names``: itself if it is one, else ``base[1]``,
-    ``base[2]``, ... in index order (FMI structured naming); [] if none."""
+    ``base[2]``, ... in index order (FMI structured naming; a matrix ``base[1,1]``,
+    ``base[1,2]``, ... row-major); [] if none."""
     names = list(names)
     if base in names:
         return [base]
-    found = sorted((int(m.group(2)), n) for n in names if (m := _INDEXED.match(n)) and m.group(1) == base)
+    found = sorted((tuple(int(i) for i in m.group(2).split(",")), n)
+                   for n in names if (m := _INDEXED.match(n)) and m.group(1) == base)
     return [n for _, n in found]
 
 

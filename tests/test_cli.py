@@ -144,7 +144,7 @@ MISTAKES = {
     "role-names-no-output": (["run", "roleoutput.toml", "--fmus", "{fmus}"],
                              ["roleoutput.toml: roles.q: 'plant.qq' names no output of plant"]),
     "build-unknown-robot": (["build", "no-such-robot", "--out", "built"],
-                            ["robofmu build: unknown robot 'no-such-robot'; described robots: chess"]),
+                            ["robofmu build: unknown robot 'no-such-robot'; described robots: 3rrp, chess"]),
     "build-out-is-a-file": (["build", "--out", "afile"], ["robofmu build: --out afile: exists and is a file"]),
     "ssp-unknown-experiment": (["ssp", "no-such-experiment"], ["robofmu ssp: unknown experiment"]),
     "ssp-out-is-a-folder": (["ssp", "chess-pd", "--fmus", "{fmus}", "--out", "mine"],

@@ -36,7 +36,7 @@ from robofmu.system.fmu import Block, FMUError
 from fmu_util import open_block, robot_blocks
 
 ALL = robot_blocks()
-WITH_INPUTS = robot_blocks(kinds=("ik", "controller", "plant", "fk"))
+WITH_INPUTS = robot_blocks(kinds=("ik", "controller", "plant", "fk", "jacobian"))
 STATEFUL = {"plant", "controller", "ik"}        # controller: its integral (ki > 0); ik: its held solution
 H = 0.01                                        # s, communication step of the rollback tests
 
@@ -44,7 +44,7 @@ H = 0.01                                        # s, communication step of the r
 SI = {"1": {}, "s": {"s": 1}, "m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s2": {"m": 1, "s": -2},
       "rad": {"rad": 1}, "rad/s": {"rad": 1, "s": -1}, "rad/s2": {"rad": 1, "s": -2}, "kg": {"kg": 1},
       "N": {"kg": 1, "m": 1, "s": -2}, "N.m": {"kg": 1, "m": 2, "s": -2}, "1/s": {"s": -1},
-      "1/s2": {"s": -2}, "1/s3": {"s": -3}}
+      "1/s2": {"s": -2}, "1/s3": {"s": -3}, "m/rad": {"m": 1, "rad": -1}, "rad/m": {"rad": 1, "m": -1}}
 
 
 def fmu(fmu_root, robot, block):
@@ -122,7 +122,7 @@ def test_variables_have_descriptions_si_units_and_structured_names(fmu_root, rob
     for sv in root.find("ModelVariables"):
         name = sv.get("name")
         assert sv.get("description"), name
-        assert re.fullmatch(r"[a-z_0-9]+(\[\d+\])?", name), name       # structured naming, 1-based
+        assert re.fullmatch(r"[a-z_0-9]+(\[\d+\])?|J\[\d+,\d+\]", name), name   # structured naming, 1-based
         assert not name.endswith("[0]"), name
         if sv[0].tag == "Real":
             assert sv[0].get("unit") in units, name
@@ -172,6 +172,14 @@ def test_output_dependencies_are_what_the_block_declares(fmu_root, robot, block)
         assert ("grip" in inputs) == (robot == "chess")
     if block == "fk":
         assert outputs == {f"x[{i}]": {f"q[{j}]" for j in range(1, n + 1)} for i in range(1, m + 1)}
+    if block == "jacobian":                                     # row-major J[i,j], each on every q
+        assert outputs == {f"J[{i},{j}]": {f"q[{k}]" for k in range(1, n + 1)}
+                           for i in range(1, m + 1) for j in range(1, n + 1)}
+        assert list(outputs) == [f"J[{i},{j}]" for i in range(1, m + 1) for j in range(1, n + 1)]
+    if block == "plant":                                        # a wrench input exactly with x outputs
+        wrench = hasattr(model(robot), "wrench_torque")
+        assert ({f"f_ext[{i}]" for i in range(1, m + 1)} <= inputs) == wrench
+        assert ({f"x[{i}]" for i in range(1, m + 1)} <= set(outputs)) == wrench
     if block == "ik":
         x, xd, xdd = ({f"{b}[{i}]" for i in range(1, m + 1)} for b in ("x_ref", "xd_ref", "xdd_ref"))
         for j in range(1, n + 1):
@@ -187,6 +195,9 @@ def test_output_dependencies_are_what_the_block_declares(fmu_root, robot, block)
     if block == "plant":
         for j in range(1, n + 1):
             assert initial[f"q[{j}]"] == {f"q0[{j}]"} and initial[f"qd[{j}]"] == {f"qd0[{j}]"}
+        for i in range(1, m + 1):
+            if f"x[{i}]" in initial:                          # the pose: FK of every q0
+                assert initial[f"x[{i}]"] == {f"q0[{j}]" for j in range(1, n + 1)}
     else:                                   # attribute left out: depends on every known
         assert all(d is None for d in initial.values())
 
@@ -248,14 +259,15 @@ def inputs_at(robot: str, block: str, t: float, k: int) -> dict:
         reference.configure()
         reference.output(0.2 + t)
         values = {b: reference.get(b) for b in ("x_ref", "xd_ref", "xdd_ref")}
-        if k == 5:                                            # an excursion out of the workspace
-            values["x_ref"] = values["x_ref"] * 10.0
+        if k == 5:                                            # an excursion out of the workspace (every
+            values["x_ref"] = values["x_ref"] + 10.0          # arm reaches less than 10 m; 3rrp 0.23 m)
         return values
     return {
         "q_ref": home + 0.05 * np.sin(7 * t + w), "qd_ref": 0.1 * np.cos(7 * t + w),
         "qdd_ref": 0.2 * np.sin(5 * t + w), "q": home + 0.04 * np.cos(5 * t + w),
         "qd": 0.1 * np.sin(3 * t + w),
         "tau": rm.gravity_torque(home) * (1.0 + 0.1 * np.sin(9 * t + w)) + 0.01 * np.sin(t + w),
+        "f_ext": 0.001 * np.sin(2 * t + np.arange(1, rm.m + 1)),
         "grip": k >= 3,
     }
 
@@ -443,7 +455,7 @@ def oracle(robot: str, block: str, steps: int, h: float, inputs: dict | None = N
 def closed_form(robot: str, block: str, t: float, inputs: dict) -> dict:
     """Outputs written out by hand where that is cheap (lone FMU at its defaults, time t)."""
     d = load_description(robot)
-    p = d.trajectory.parameters
+    p = d.trajectory.parameters if d.trajectory is not None else {}
     rm = model(robot)
     if block == "trajectory" and robot == "chess":               # first move: dz = 0.15 m in 1 s
         a = 4.5 * 0.15
@@ -461,8 +473,8 @@ def closed_form(robot: str, block: str, t: float, inputs: dict) -> dict:
         a = 4.0 * dq / T ** 2
         return {**{f"q_ref[{j + 1}]": p["q_start"][j] + 0.5 * a[j] * t * t for j in range(3)},
                 **{f"qd_ref[{j + 1}]": a[j] * t for j in range(3)}}
-    if block == "controller":                                    # all inputs 0: tau = g(0)
-        return {f"tau[{j + 1}]": g for j, g in enumerate(rm.gravity_torque(np.zeros(rm.n)))}
+    if block == "controller":                                    # q = q_ref = home, rates 0: tau = g(home)
+        return {f"tau[{j + 1}]": g for j, g in enumerate(gravity_at_home(robot))}
     if block == "ik":                                            # x_ref starts at FK(home)
         return {**{f"q_ref[{j + 1}]": q for j, q in enumerate(rm.configuration("home"))}, "reachable": True}
     if block == "fk":
@@ -476,6 +488,8 @@ def closed_form(robot: str, block: str, t: float, inputs: dict) -> dict:
         elif robot == "planar2r":                               # q2 relative to link 1
             q1, q2 = q
             x = [math.cos(q1) + 0.5 * math.cos(q1 + q2), math.sin(q1) + 0.5 * math.sin(q1 + q2)]
+        elif robot == "3rrp":                                    # loop closure by Newton, from the home pose
+            x = list(closure_model().pose_from_joints(np.array(q), np.array([0.0, 0.0, -math.pi / 3])))
         elif robot == "rrp_offset":
             q1, q2, l3 = q
             x = [-0.5 * math.sin(q1) - l3 * math.sin(q2) * math.cos(q1),
@@ -484,6 +498,26 @@ def closed_form(robot: str, block: str, t: float, inputs: dict) -> dict:
             raise AssertionError(f"no closed-form FK written here for {robot!r}")
         return {f"x[{i + 1}]": v for i, v in enumerate(x)}
     return {}
+
+
+def gravity_at_home(robot: str) -> np.ndarray:
+    """g(home), not by the controller's path (M u + N, inverse dynamics): from the model's
+    forward dynamics at rest with no torque, M qdd = -g, so g = -M qdd(tau = 0); for 3rrp,
+    which moves in a horizontal plane, written out: zero."""
+    rm = model(robot)
+    home = rm.configuration("home")
+    if robot == "3rrp":
+        return np.zeros(3)
+    return -rm.mass_matrix(home) @ rm.forward_dynamics(home, np.zeros(rm.n), np.zeros(rm.n))
+
+
+@lru_cache(maxsize=None)
+def closure_model():
+    """The 3rrp's loop closures in the Lagrange formulation (independent of the robot model)."""
+    from robofmu.components.robots.parallel_lagrange import LagrangeRRP3
+    mech = load_description("3rrp").mechanism
+    return LagrangeRRP3(mech.r, mech.link_mass, mech.link_com, mech.link_inertia, mech.ee_mass,
+                        mech.ee_inertia, line_offsets=mech.line_offsets)
 
 
 def _check(got: dict, expected: dict, atol: float, what: str):
@@ -562,11 +596,17 @@ def test_rpp_trajectory_fmu_at_half_time(fmu_root):
 @pytest.mark.parametrize("robot", available())
 def test_plant_with_zero_torque_falls_as_gravity_predicts(fmu_root, robot):
     """From rest at home with tau = 0: qdd(0) = M(q0)^-1 (-g(q0)); after a step of h,
-    qd(h) = qdd(0) h + O(h^3) and q(h) = q0 + qdd(0) h^2 / 2 + O(h^4) (qd(0) = 0)."""
+    qd(h) = qdd(0) h + O(h^3) and q(h) = q0 + qdd(0) h^2 / 2 + O(h^4) (qd(0) = 0). A robot
+    moving in a horizontal plane (3rrp) stays at rest."""
     rm = load_model(robot)
     q0 = rm.configuration("home")
     qdd = np.linalg.solve(rm.mass_matrix(q0), -rm.gravity_torque(q0))
-    assert np.max(np.abs(qdd)) > 1.0                       # gravity really acts
+    horizontal = robot == "3rrp"                           # robots.md: it moves in the horizontal plane
+    if horizontal:                                         # gravity along z does no work there
+        assert rm.potential_energy(q0) == 0.0
+        np.testing.assert_array_equal(qdd, np.zeros(rm.n))
+    else:
+        assert np.max(np.abs(qdd)) > 1.0                   # gravity really acts
     if robot == "rpp":                                     # only the vertical slide falls, at g
         np.testing.assert_allclose(qdd, [0.0, 0.0, -9.81], atol=1e-12)
     h = 1e-4
@@ -578,6 +618,10 @@ def test_plant_with_zero_torque_falls_as_gravity_predicts(fmu_root, robot):
         q, qd = np.array(b.get("q")), np.array(b.get("qd"))
     finally:
         b.close()
+    if horizontal:                                         # stays at rest, exactly
+        np.testing.assert_array_equal(qd, np.zeros(rm.n))
+        np.testing.assert_array_equal(q, q0)
+        return
     scale = np.max(np.abs(qdd))
     np.testing.assert_allclose(qd / h, qdd, rtol=0, atol=1e-5 * scale)
     np.testing.assert_allclose(2 * (q - q0) / h**2, qdd, rtol=0, atol=1e-5 * scale)

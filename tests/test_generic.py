@@ -41,7 +41,9 @@ def robot_numbers() -> set[float]:
     found = set()
     for robot in available():
         text = (ROBOTS_DIR / robot / f"{robot}.toml").read_text()
-        text += (ROBOTS_DIR / robot / f"{robot}.urdf").read_text()
+        urdf = ROBOTS_DIR / robot / f"{robot}.urdf"
+        if urdf.is_file():                                # a closed chain is described in its TOML
+            text += urdf.read_text()
         for match in re.findall(r"(?<![\w.])-?\d+\.\d+(?:[eE]-?\d+)?", text):
             value = abs(float(match))
             if value not in COMMON:

@@ -105,9 +105,10 @@ def refusal(path, key: str) -> str:
 def test_an_unedited_copy_reads_back_the_same_description(robot, copy_robot):
     path = copy_robot(robot)
     copy, real = read(path), load_description(robot)
-    assert copy.path == path and copy.urdf == path.parent / real.urdf.name
+    assert copy.path == path
+    assert copy.urdf == (None if real.urdf is None else path.parent / real.urdf.name)   # None: a closed chain
     for field in ("name", "summary", "blocks", "task", "configurations", "gravity", "gravity_direction",
-                  "payload", "gains", "trajectory", "ik"):
+                  "payload", "gains", "trajectory", "ik", "mechanism"):
         assert getattr(copy, field) == getattr(real, field), field
     assert load_model(copy).n == load_model(real).n
 
@@ -274,9 +275,94 @@ def test_missing_file_and_bad_syntax_are_named(tmp_path):
     refusal(path, "(syntax)")
 
 
+# -- closed-chain mechanisms ([mechanism] instead of a URDF) -------------------------------------------
+@pytest.mark.parametrize("key", [
+    "mechanism.kind", "mechanism.r", "mechanism.line_offsets", "mechanism.link_com", "mechanism.link_mass",
+    "mechanism.link_inertia", "mechanism.ee_mass", "mechanism.ee_inertia", "mechanism.velocity_limits",
+    "task.coordinates",
+])
+def test_missing_mechanism_key_is_refused_naming_file_and_key(copy_robot, key):
+    path = copy_robot("3rrp", lambda d: del_key(d, key))
+    assert refusal(path, key).endswith(f"{key}: missing")
+
+
+@pytest.mark.parametrize("key, value, problem", [
+    ("mechanism", "planar_3rrp", "must be a table, got 'planar_3rrp'"),
+    ("mechanism.kind", "delta", "unknown mechanism 'delta' (known: planar_3rrp)"),
+    ("mechanism.r", 0.0, "must be > 0, got 0.0"),
+    ("mechanism.r", "0.2", "must be a finite number"),
+    ("mechanism.line_offsets", [0.0, 1.0, 2.0], "must be three directions 120 degrees apart"),
+    ("mechanism.line_offsets", [1.0471975511965976, 3.141592653589793], "must have 3 values, got 2"),
+    ("mechanism.link_com", 1.5, "must be a fraction of r in [0, 1], got 1.5"),
+    ("mechanism.link_mass", -0.1, "must be >= 0, got -0.1"),
+    ("mechanism.ee_inertia", float("nan"), "must be a finite number"),
+    ("mechanism.velocity_limits", [10.0, 0.0, 10.0], "must all be > 0"),
+    ("mechanism.position_lower", [0.0, "a", 0.0], "must be a list of numbers (inf allowed)"),
+    ("mechanism.position_upper", [10.0, -10.0, float("inf")], "must exceed position_lower element by element"),
+    ("mechanism.colour", 1.0, "unknown key (known: "),
+    ("task.axes", [0, 1, 2], "unknown key (known: coordinates, frame)"),
+])
+def test_bad_mechanism_is_refused_naming_file_and_key(copy_robot, key, value, problem):
+    def edit(d):
+        set_key(d, key, value)
+        if key == "mechanism.position_upper":
+            set_key(d, "mechanism.position_lower", [0.0, 0.0, 0.0])
+    path = copy_robot("3rrp", edit)
+    assert problem in refusal(path, key)
+
+
+def test_a_robot_has_a_urdf_or_a_mechanism(copy_robot):
+    path = copy_robot("3rrp", lambda d: set_key(d, "urdf", "3rrp.urdf"))
+    assert "a robot has either a `urdf` or a [mechanism] table, not both" in refusal(path, "mechanism")
+    path = copy_robot("3rrp", lambda d: del_key(d, "mechanism"))
+    assert refusal(path, "urdf").endswith("urdf: missing")
+
+
+def test_a_link_without_inertia_about_o_is_refused(copy_robot):
+    def massless(d):
+        set_key(d, "mechanism.link_mass", 0.0)
+        set_key(d, "mechanism.link_inertia", 0.0)
+    path = copy_robot("3rrp", massless)
+    assert "each link needs a positive moment of inertia about O" in refusal(path, "mechanism.link_inertia")
+
+
+def test_a_trajectory_table_needs_a_trajectory_block_and_the_other_way_round(copy_robot):
+    path = copy_robot("3rrp", lambda d: set_key(d, "blocks", ["ik", "controller", "plant", "fk"]))
+    assert "a [trajectory] table is needed exactly when `blocks` lists 'trajectory'" in refusal(path, "trajectory")
+    path = copy_robot("3rrp", lambda d: d.pop("trajectory"))
+    assert refusal(path, "trajectory").endswith("trajectory: missing")
+
+
+@pytest.mark.parametrize("key, value, problem", [
+    ("configurations.home", [0.0, 2.0], "needs 3 joint values (the mechanism has 3 actuated joints), got 2"),
+    ("task.coordinates", ["x", "y"], "needs 3 names (the pose x, y, theta)"),
+    ("task.frame", "tcp", "the mechanism's task body is 'end_effector', got 'tcp'"),
+    ("gravity.direction", [0.0, -1.0, 0.0], "the mechanism moves in the horizontal x-y plane: gravity must act along z"),
+])
+def test_the_mechanism_model_refuses_what_the_toml_alone_cannot_check(copy_robot, key, value, problem):
+    path = copy_robot("3rrp", lambda d: set_key(d, key, value))
+    description = read(path)
+    with pytest.raises(DescriptionError) as info:
+        load_model(description)
+    assert str(info.value).startswith(f"{path}: {key}: ") and problem in str(info.value)
+
+
+def test_load_model_picks_the_class_by_the_descriptions_kind():
+    from robofmu.components.robots import MODEL_CLASSES, model_class
+    from robofmu.components.robots.parallel import Planar3RRP
+    from robofmu.components.robots.serial import SerialRobot
+
+    assert set(MODEL_CLASSES) == {"serial", "planar_3rrp"}
+    assert model_class("serial") is SerialRobot and model_class("planar_3rrp") is Planar3RRP
+    assert type(load_model("rrp")) is SerialRobot and type(load_model("3rrp")) is Planar3RRP
+    assert load_description("rrp").model_kind == "serial" and load_description("3rrp").model_kind == "planar_3rrp"
+    with pytest.raises(ValueError, match="no robot model for kind 'delta'; known: planar_3rrp, serial"):
+        model_class("delta")
+
+
 # -- the described robots --------------------------------------------------------------------------
 def test_the_robots_are_described():
-    assert available() == ["chess", "planar2r", "rpp", "rrp", "rrp_offset"]
+    assert available() == ["3rrp", "chess", "planar2r", "rpp", "rrp", "rrp_offset"]
 
 
 def test_every_described_robot_loads(robot):

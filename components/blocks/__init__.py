@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from ..robots import DescriptionError, RobotDescription, load_description, load_model
 from .base import Block, StepRefused, Variable, block_class, registered
-from . import controller, fk, ik, plant, trajectory  # noqa: F401  (register the blocks)
+from . import controller, fk, ik, jacobian, plant, trajectory  # noqa: F401  (register the blocks)
 
 __all__ = ["Block", "StepRefused", "Variable", "block_class", "block_type", "make_block", "registered"]
 

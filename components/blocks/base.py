@@ -77,6 +77,11 @@ class Variable:
     parameter: Parameter | None = None
 
 
+def quotient_unit(numerator: str, denominator: str) -> str:
+    """SI unit of a ratio (a Jacobian entry: task unit over joint unit); "1" for equal units."""
+    return "1" if numerator == denominator else f"{numerator}/{denominator}"
+
+
 def _names(base: str, n: int) -> list[str]:
     return [f"{base}[{i}]" for i in range(1, n + 1)]
 
@@ -165,6 +170,23 @@ class Block:
             self._add(Variable(f"{base}[{i}]", base, "Real", causality, units[i - 1], text,
                                starts[i - 1], _tuple(dep), _tuple(idep)))
         self._slots[base] = slice(first, first + n)
+        return self._slots[base]
+
+    def real_matrix(self, base: str, rows: int, cols: int, causality: str, unit, description,
+                    depends=None, initial_depends=None) -> slice:
+        """Declare ``base[1,1]`` .. ``base[rows,cols]`` row-major (FMI structured naming with two
+        indices); returns their slice of :attr:`values` (reshape to (rows, cols)).
+
+        ``unit``, ``description``, ``depends`` and ``initial_depends`` are callables of (i, j)
+        (1-based) or one value for every element."""
+        first = len(self.variables)
+        for i in range(1, rows + 1):
+            for j in range(1, cols + 1):
+                pick = lambda f: f(i, j) if callable(f) else f
+                self._add(Variable(f"{base}[{i},{j}]", base, "Real", causality, pick(unit),
+                                   pick(description), 0.0, _tuple(pick(depends)),
+                                   _tuple(pick(initial_depends))))
+        self._slots[base] = slice(first, first + rows * cols)
         return self._slots[base]
 
     def boolean(self, name: str, causality: str, description: str, start: bool = False,

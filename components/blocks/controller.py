@@ -1,7 +1,9 @@
 """Controller block: computed torque, tau = M(q)(qdd_ref + kd e' + kp e + ki z) + N(q, qd).
 
 Direct feedthrough: tau is computed from the inputs at the current communication point; the
-integral z = integral of e dt advances with the error held over the step (z += e h). For a robot
+integral z = integral of e dt advances with the error held over the step (z += e h). The
+position inputs q_ref and q start at the robot's home configuration (the rest at 0), so a lone
+controller holds home with tau = g(home). For a robot
 with a payload the model carries ``payload_mass`` while ``grip`` is true (0 by default: the
 controller does not know the payload).
 """
@@ -31,10 +33,11 @@ class ControllerBlock(Block):
             self.real("payload_mass", "parameter", "kg", "Payload the model assumes while grip is true "
                       "(0: unknown to it)", 0.0, low=0.0)
         u0, u1, u2 = (robot.joint_units(k) for k in range(3))
-        self.q_ref = self.reals("q_ref", n, "input", u0, "Joint {i} reference position")
+        home = robot.configuration("home")     # positions start at home (q = 0 may be singular)
+        self.q_ref = self.reals("q_ref", n, "input", u0, "Joint {i} reference position", starts=home)
         self.qd_ref = self.reals("qd_ref", n, "input", u1, "Joint {i} reference velocity")
         self.qdd_ref = self.reals("qdd_ref", n, "input", u2, "Joint {i} reference acceleration")
-        self.q = self.reals("q", n, "input", u0, "Joint {i} measured position")
+        self.q = self.reals("q", n, "input", u0, "Joint {i} measured position", starts=home)
         self.qd = self.reals("qd", n, "input", u1, "Joint {i} measured velocity")
         inputs = [name for b in ("q_ref", "qd_ref", "qdd_ref", "q", "qd") for name in vector_names(b, n)]
         if self.has_payload:

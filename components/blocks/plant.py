@@ -2,6 +2,12 @@
 
 No direct feedthrough: the outputs are the state at the communication point. The initial
 state defaults to the description's ``home`` configuration at rest.
+
+A robot model with an end-effector wrench (it has ``wrench_torque``, e.g. a closed-chain
+mechanism in actuated coordinates) gets an extra input ``f_ext[i]``, one component per task
+coordinate (a force in N along a length coordinate, a moment in N.m about an angle one), held
+over the step like tau and passed to the model's ``forward_dynamics(q, qd, tau, f_ext)``, and
+extra outputs ``x[i]``: the task coordinates (pose) of the state, FK(q).
 """
 from __future__ import annotations
 
@@ -10,7 +16,10 @@ import math
 import numpy as np
 
 from ..plant import Plant, PlantDiverged
-from .base import Block, StepRefused
+from .base import Block, StepRefused, vector_names
+
+#: The effort unit of a wrench component along / about a task coordinate of this unit.
+_WRENCH_UNITS = {"m": "N", "rad": "N.m"}
 
 #: More RK4 sub-steps than this in one communication step is a mistake (an hour-long step).
 MAX_SUBSTEPS = 1_000_000
@@ -18,8 +27,8 @@ MAX_SUBSTEPS = 1_000_000
 
 class PlantBlock(Block):
     kind = "plant"
-    summary = ("manipulator dynamics M(q)qdd + C(q,qd)qd + g(q) = tau (Pinocchio ABA), RK4 with "
-               "tau held over the step; no direct feedthrough")
+    summary = ("manipulator dynamics M(q)qdd + C(q,qd)qd + g(q) = tau (+ J^T f_ext where the model "
+               "takes an end-effector wrench), RK4 with the inputs held over the step; no direct feedthrough")
 
     def declare(self):
         robot, d = self.robot, self.description
@@ -40,10 +49,23 @@ class PlantBlock(Block):
                               "Joint {i} actuator effort (torque, or force for a prismatic joint)")
         if self.has_payload:
             self.grip = self.boolean("grip", "input", "Gripper closed: carry payload_mass")
+        self.has_wrench = callable(getattr(robot, "wrench_torque", None))
+        if self.has_wrench:
+            coords, units = robot.task_coordinates, robot.task_units(0)
+            efforts = [_WRENCH_UNITS[u] for u in units]
+            self.f_ext = self.reals(
+                "f_ext", robot.m, "input", efforts,
+                lambda i: (f"End-effector wrench: {'force along' if efforts[i - 1] == 'N' else 'moment about'} "
+                           f"task coordinate {coords[i - 1]} (world axes)"))
         self.q = self.reals("q", n, "output", u0, "Joint {i} position", depends=[],
                             initial_depends=lambda i: [f"q0[{i}]"])
         self.qd = self.reals("qd", n, "output", u1, "Joint {i} velocity", depends=[],
                              initial_depends=lambda i: [f"qd0[{i}]"])
+        if self.has_wrench:
+            coords = robot.task_coordinates
+            self.x = self.reals("x", robot.m, "output", robot.task_units(0),
+                                lambda i: f"Task coordinate {coords[i - 1]} of the state (FK of q)", depends=[],
+                                initial_depends=vector_names("q0", n))
         self.plant = None
 
     def configure(self):
@@ -61,8 +83,13 @@ class PlantBlock(Block):
             if closed != self.plant.grip:
                 self.plant.set_grip(closed)
 
+    def _wrench(self):
+        return self.values[self.f_ext] if self.has_wrench else None
+
     def output(self, t):
         self.values[self.q], self.values[self.qd] = self.plant.q, self.plant.qd
+        if self.has_wrench:
+            self.values[self.x] = self.robot.fk(self.plant.q)
 
     def advance(self, t, h):
         substeps = math.ceil(h / self.plant.max_substep - 1e-9)
@@ -71,7 +98,7 @@ class PlantBlock(Block):
                               f"{self.plant.max_substep:g} s (at most {MAX_SUBSTEPS}); step refused")
         self._grip()
         try:
-            self.plant.step(self.values[self.tau], h, t)
+            self.plant.step(self.values[self.tau], h, t, self._wrench())
         except PlantDiverged as exc:
             raise StepRefused(str(exc)) from None
 
@@ -93,6 +120,5 @@ class PlantBlock(Block):
 
     def derivative(self, t):
         self._grip()
-        n = self.robot.n
         x = self.plant.x
-        return np.concatenate([x[n:], self.robot.forward_dynamics(x[:n], x[n:], self.values[self.tau])])
+        return np.concatenate([x[self.robot.n:], self.plant.acceleration(x, self.values[self.tau], self._wrench())])

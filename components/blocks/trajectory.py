@@ -2,7 +2,9 @@
 
 ``waypoints``: task space, LSPB moves through waypoints with pauses (and gripper events);
 ``line``: task space, a straight line at minimum time with a trapezoidal speed;
-``joint_bangbang``: joint space, the synchronized minimum-time bang-bang.
+``joint_bangbang``: joint space, the synchronized minimum-time bang-bang;
+``circle``: task space, once round a circle in the first two task coordinates with an LSPB
+phase (further task coordinates offset + amplitude sin phi).
 Outputs at time t belong to t; no inputs.
 """
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..parameters import Parameter
-from ..trajectory import StraightLine, SynchronizedBangBang, WaypointTrajectory
+from ..trajectory import Circle, StraightLine, SynchronizedBangBang, WaypointTrajectory
 from .base import Block
 from .text import format_matrix, format_vector, parse_matrix, parse_vector
 
@@ -188,4 +190,55 @@ class JointBangBangBlock(_Reference):
     def configure(self):
         self.profile = SynchronizedBangBang(self.finite_vector("q_start"), self.finite_vector("q_end"),
                                             self.finite_vector("a_max", above=0.0))
+        super().configure()
+
+
+class CircleBlock(_Reference):
+    variant = "circle"
+    summary = ("task-space circle run once: phi 0 -> 2 pi by LSPB (cruise_factor x mean speed), at rest "
+               "at both ends; x[1:2] = center + radius (cos, sin)(start_angle + sense phi), further "
+               "coordinates offset + amplitude sin phi; outputs at time t belong to t")
+    scalars = (
+        Parameter("radius", "Real", "m", "Circle radius (in the first two task coordinates)", None, above=0.0),
+        Parameter("start_angle", "Real", "rad", "Direction of the start point from the centre", None),
+        Parameter("sense", "Integer", "", "1: counter-clockwise, -1: clockwise", 1, low=-1, high=1),
+        Parameter("duration", "Real", "s", "Time once round the circle", None, above=0.0),
+        Parameter("cruise_factor", "Real", "1", "Cruise phase rate over the mean rate, in (1, 2]", 1.5,
+                  above=1.0, high=2.0),
+    )
+
+    def declare(self):
+        coords, units = _task(self)
+        m = len(coords)
+        if m < 2 or units[0][0] != units[0][1]:
+            self.table_error("trajectory", "profile", "a circle needs two task coordinates of one unit "
+                             f"first, got {list(coords)} ({', '.join(units[0])})")
+        extra = m - 2
+        given, rest = self.given({"center": 2, **({"offset": extra, "amplitude": extra} if extra else {})})
+        values = self.table_values("trajectory", self.scalars, rest)
+        self.reals("center", 2, "parameter", units[0][:2],
+                   lambda i: f"Circle centre, coordinate {coords[i - 1]}", given["center"])
+        for p in self.scalars:
+            self.declare_parameter(p, values[p.name])
+        if extra:
+            self.reals("offset", extra, "parameter", units[0][2:],
+                       lambda i: f"Task coordinate {coords[i + 1]}: offset of offset + amplitude sin phi",
+                       given["offset"])
+            self.reals("amplitude", extra, "parameter", units[0][2:],
+                       lambda i: f"Task coordinate {coords[i + 1]}: amplitude of offset + amplitude sin phi",
+                       given["amplitude"])
+        self.extra = extra
+        self.declare_outputs(("x_ref", "xd_ref", "xdd_ref"), units,
+                             lambda i, w: f"Reference task {w} along {coords[i - 1]}")
+
+    def configure(self):
+        sense = self.parameter("sense")
+        if sense == 0:
+            raise ValueError("parameter sense = 0 is invalid: must be 1 (counter-clockwise) or -1 (clockwise)")
+        extra = self.extra
+        self.profile = Circle(self.finite_vector("center"), self.parameter("radius"),
+                              self.parameter("start_angle"), sense, self.parameter("duration"),
+                              self.parameter("cruise_factor"),
+                              self.finite_vector("offset") if extra else (),
+                              self.finite_vector("amplitude") if extra else ())
         super().configure()

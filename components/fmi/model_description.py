@@ -27,6 +27,8 @@ UNITS = {
     "1/s2": {"s": -2},
     "1/s": {"s": -1},
     "1/s3": {"s": -3},
+    "m/rad": {"m": 1, "rad": -1},       # Jacobian entries: task unit over joint unit
+    "rad/m": {"rad": 1, "m": -1},
 }
 
 #: Tool name of the vendor annotation that tells robot and block kind of a FMU.

@@ -266,3 +266,40 @@ class OffsetRRPIK(IKSolver):
         q = np.array([math.remainder(q1, _TWO_PI), math.atan2(s, h), l3])
         _check_limits(self, q, x)
         return q
+
+
+# -- seed 004: the planar 3-RRP parallel mechanism -------------------------------------------------
+class Planar3RRPIK(IKSolver):
+    """Planar 3-RRP mechanism: closed form, leg by leg (the robot model's
+    :meth:`~robofmu.components.robots.parallel.Planar3RRP.ik`).
+
+    Line i of the end effector lies at p_i = n_i . Z from O; its tip is Q_i = p_i n_i + w_i u_i
+    with w_i = +/- sqrt(r^2 - p_i^2), so q_i = phi_i + atan2(p_i, w_i). ``branch`` gives the sign
+    per leg: '+' the tip farther along the line (the larger slider extension; inside the disc
+    |Z| < r the only positive one), "+++" the default (the specification's branch with positive
+    slider extensions), the other seven combinations as options. Angles are wrapped to within pi
+    of the ``home`` configuration. Unreachable when a line passes farther than r from O (every
+    pose beyond 2r/sqrt(3), some orientations beyond r) or a joint leaves its limits.
+    """
+
+    kind = "planar_3rrp"
+    parameters = (
+        Parameter("branch", "String", "", "IK branch: one sign per leg, '+' the tip farther along "
+                  "its line (the larger slider extension), '-' the other", "+++",
+                  choices=tuple("".join(s) for s in ((a, b, c) for a in "+-" for b in "+-" for c in "+-"))),
+    )
+
+    def setup(self):
+        robot = self.robot
+        if getattr(robot, "kind", None) != "planar_3rrp" or not hasattr(robot, "ik_many"):
+            raise ValueError(f"IK solver {self.kind!r}: robot {robot.description.name!r} is not a planar "
+                             "3-RRP mechanism")
+        self.branch = self.values["branch"]
+
+    def position(self, x):
+        try:
+            q = self.robot.ik(x, self.branch)
+        except ValueError as exc:
+            raise Unreachable(str(exc)) from None
+        _check_limits(self, q, x)
+        return q

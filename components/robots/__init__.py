@@ -1,4 +1,5 @@
-"""Robots as data: one folder per robot, holding a URDF and a small TOML description.
+"""Robots as data: one folder per robot, holding a small TOML description and, for a serial robot,
+a URDF (a closed-chain mechanism describes itself in its TOML's ``[mechanism]`` table).
 
 >>> from robofmu.components.robots import load_description, load_model
 >>> load_model("chess").n
@@ -7,13 +8,14 @@
 from __future__ import annotations
 
 from functools import lru_cache
+from importlib import import_module
 from pathlib import Path
 
 from .description import DescriptionError, Gains, RobotDescription, read
 from .model import RobotModel
 
-__all__ = ["ROBOTS_DIR", "available", "description_path", "load_description", "load_model",
-           "DescriptionError", "Gains", "RobotDescription", "RobotModel"]
+__all__ = ["ROBOTS_DIR", "MODEL_CLASSES", "available", "description_path", "load_description", "load_model",
+           "model_class", "DescriptionError", "Gains", "RobotDescription", "RobotModel"]
 
 ROBOTS_DIR = Path(__file__).resolve().parent
 
@@ -37,9 +39,27 @@ def load_description(name: str) -> RobotDescription:
     return read(description_path(name))
 
 
-def load_model(robot: str | RobotDescription, gravity: float | None = None) -> RobotModel:
-    """A new model instance of a robot (by name or description); each owns its payload state."""
-    from .serial import SerialRobot
+#: The robot-model class of each kind of description (:attr:`RobotDescription.model_kind`), as
+#: ``"module:Class"`` of this package, imported when first used: ``serial`` for a robot with a
+#: URDF (Pinocchio), a mechanism's ``[mechanism] kind`` for a closed chain.
+MODEL_CLASSES = {
+    "serial": "serial:SerialRobot",
+    "planar_3rrp": "parallel:Planar3RRP",
+}
 
+
+def model_class(kind: str) -> type[RobotModel]:
+    """The robot-model class registered for ``kind``; ValueError naming the known kinds."""
+    try:
+        module, name = MODEL_CLASSES[kind].split(":")
+    except KeyError:
+        raise ValueError(f"no robot model for kind {kind!r}; known: {', '.join(sorted(MODEL_CLASSES))}") from None
+    return getattr(import_module(f".{module}", __name__), name)
+
+
+def load_model(robot: str | RobotDescription, gravity: float | None = None) -> RobotModel:
+    """A new model instance of a robot (by name or description); each owns its payload state.
+
+    The class is the one :data:`MODEL_CLASSES` registers for the description's ``model_kind``."""
     description = load_description(robot) if isinstance(robot, str) else robot
-    return SerialRobot(description, gravity)
+    return model_class(description.model_kind)(description, gravity)

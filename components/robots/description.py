@@ -40,6 +40,19 @@ Schema (every table but those marked optional is required)::
     [ik]                                 # optional (a robot whose trajectory is in joint space has none)
     solver = "spherical"                 # a registered solver; its own parameters follow
     ...
+
+A closed-chain mechanism, which a URDF cannot express, gives a ``[mechanism]`` table instead of
+``urdf`` (exactly one of the two)::
+
+    [mechanism]
+    kind = "planar_3rrp"                 # a kind of :data:`MECHANISMS`; its own keys follow
+    r = 0.2                              # ...
+
+Its ``[task]`` then holds ``coordinates`` only (the mechanism's own task coordinates, e.g. x, y,
+theta) and optionally ``frame`` (the mechanism's task body, default ``end_effector``); ``axes`` is
+not used. ``[trajectory]`` is needed exactly when ``blocks`` lists "trajectory", like ``[ik]``.
+The robot model class is picked by the description's :attr:`RobotDescription.model_kind`
+(``"serial"`` for a URDF, else the mechanism's kind).
 """
 from __future__ import annotations
 
@@ -49,7 +62,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["DescriptionError", "Gains", "TaskSpace", "Payload", "Choice", "RobotDescription", "read"]
+__all__ = ["DescriptionError", "Gains", "TaskSpace", "Payload", "Choice", "Planar3RRPMechanism",
+           "MECHANISMS", "RobotDescription", "read"]
 
 #: Blocks a description may list (each built as ``fmus/<robot>/<block>.fmu``).
 KNOWN_BLOCKS = ("trajectory", "ik", "controller", "plant", "fk", "jacobian")
@@ -78,7 +92,11 @@ class Gains:
 
 @dataclass(frozen=True)
 class TaskSpace:
-    """The task coordinates: components ``axes`` of the position of URDF frame ``frame``."""
+    """The task coordinates: components ``axes`` of the position of URDF frame ``frame``.
+
+    For a closed-chain mechanism ``frame`` names its task body (``end_effector``) and the
+    coordinates are the mechanism's own (planar x, y along world axes 0, 1 and theta about
+    world axis 2: ``axes`` = (0, 1, 2), given for completeness, not read)."""
 
     frame: str
     coordinates: tuple[str, ...]
@@ -102,6 +120,56 @@ class Choice:
 
 
 @dataclass(frozen=True)
+class Planar3RRPMechanism:
+    """``[mechanism] kind = "planar_3rrp"``: three legs, each an actuated revolute joint at the
+    origin O (angle q_i), a link of length ``r`` to its tip Q_i, a passive revolute joint at Q_i
+    and a massless slider by which Q_i runs on a line of the end effector through its point Z at
+    angle theta + ``line_offsets[i]``.
+
+    Attributes
+    ----------
+    kind : str
+        ``"planar_3rrp"``.
+    r : float
+        Link length (m), > 0.
+    line_offsets : tuple of 3 floats
+        Angles of the three lines relative to theta (rad); three directions 120 degrees apart
+        (their unit vectors sum to zero), e.g. (pi/3, pi, -pi/3).
+    link_com : float
+        Centre of mass of each link as a fraction of r from O, in [0, 1].
+    link_mass : float
+        Mass of each link (kg), >= 0.
+    link_inertia : float
+        Moment of inertia of each link about its own centre of mass, about z (kg m^2), >= 0.
+    ee_mass : float
+        End-effector mass (kg) at Z, >= 0.
+    ee_inertia : float
+        End-effector moment of inertia about Z, about z (kg m^2), >= 0.
+    velocity_limits : tuple of 3 floats
+        Actuated joint rate limits (rad/s), > 0.
+    position_lower, position_upper : tuple of 3 floats
+        Actuated joint position limits (rad); -inf / +inf (the default) where there are none.
+    """
+
+    kind: str
+    r: float
+    line_offsets: tuple[float, float, float]
+    link_com: float
+    link_mass: float
+    link_inertia: float
+    ee_mass: float
+    ee_inertia: float
+    velocity_limits: tuple[float, ...]
+    position_lower: tuple[float, ...]
+    position_upper: tuple[float, ...]
+
+    @property
+    def link_inertia_about_origin(self) -> float:
+        """Each link's moment of inertia about O (kg m^2): I_c + m (link_com r)^2."""
+        return self.link_inertia + self.link_mass * (self.link_com * self.r) ** 2
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """Everything known about one robot beyond its URDF.
 
@@ -110,7 +178,8 @@ class RobotDescription:
     name, summary : str
     path : Path
         The TOML file.
-    urdf : Path
+    urdf : Path or None
+        The URDF of a serial (tree) robot; None for a closed-chain mechanism.
     blocks : tuple of str
         The blocks this robot gets, in diagram order.
     task : TaskSpace
@@ -123,16 +192,19 @@ class RobotDescription:
     payload : Payload or None
     gains : dict of str to Gains
         The seed's gain sets by name ("pd", "pid").
-    trajectory : Choice
-        Reference profile and its parameters (the trajectory block's defaults).
+    trajectory : Choice or None
+        Reference profile and its parameters (the trajectory block's defaults); None for a robot
+        without a trajectory block.
     ik : Choice or None
         IK solver and its parameters; None for robots without an IK block.
+    mechanism : Planar3RRPMechanism or None
+        The closed-chain mechanism's parameters (``[mechanism]``); None for a URDF robot.
     """
 
     name: str
     summary: str
     path: Path
-    urdf: Path
+    urdf: Path | None
     blocks: tuple[str, ...]
     task: TaskSpace
     configurations: dict[str, tuple[float, ...]]
@@ -140,8 +212,14 @@ class RobotDescription:
     gravity_direction: tuple[float, float, float]
     payload: Payload | None
     gains: dict[str, Gains]
-    trajectory: Choice
+    trajectory: Choice | None
     ik: Choice | None
+    mechanism: Planar3RRPMechanism | None = None
+
+    @property
+    def model_kind(self) -> str:
+        """Which robot-model class serves this robot: ``"serial"`` (a URDF) or the mechanism's kind."""
+        return "serial" if self.mechanism is None else self.mechanism.kind
 
     def configuration(self, name: str) -> tuple[float, ...]:
         """Joint positions of a named configuration; ValueError naming the known ones."""
@@ -194,11 +272,14 @@ class _Table:
             self.fail(name, f"must be >= {low:g}, got {value!r}")
         return float(value)
 
-    def numbers(self, name: str, default=None, length: int | None = None) -> tuple[float, ...]:
+    def numbers(self, name: str, default=None, length: int | None = None,
+                infinite: bool = False) -> tuple[float, ...]:
         value = self._get(name, default)
         if not isinstance(value, list) or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
-            self.fail(name, f"must be a list of finite numbers, got {value!r}")
+                isinstance(v, (int, float)) and not isinstance(v, bool)
+                and (math.isfinite(v) or (infinite and not math.isnan(v))) for v in value):
+            what = "numbers (inf allowed)" if infinite else "finite numbers"
+            self.fail(name, f"must be a list of {what}, got {value!r}")
         if length is not None and len(value) != length:
             self.fail(name, f"must have {length} values, got {len(value)}")
         return tuple(float(v) for v in value)
@@ -226,6 +307,51 @@ class _Table:
 _REQUIRED = object()
 
 
+def _positive(table: _Table, name: str, default=None) -> float:
+    value = table.number(name, default)
+    if not value > 0.0:
+        table.fail(name, f"must be > 0, got {value!r}")
+    return value
+
+
+def _planar_3rrp(table: _Table, kind: str) -> Planar3RRPMechanism:
+    """Read ``[mechanism] kind = "planar_3rrp"`` (see :class:`Planar3RRPMechanism`)."""
+    table.unknown({"kind", "r", "line_offsets", "link_com", "link_mass", "link_inertia", "ee_mass",
+                   "ee_inertia", "velocity_limits", "position_lower", "position_upper"})
+    offsets = table.numbers("line_offsets", _REQUIRED, length=3)
+    cx, cy = sum(math.cos(a) for a in offsets), sum(math.sin(a) for a in offsets)
+    if math.hypot(cx, cy) > 1e-9:
+        table.fail("line_offsets", f"must be three directions 120 degrees apart (unit vectors summing to "
+                                   f"zero), got {list(offsets)} (sum of length {math.hypot(cx, cy):.3g})")
+    com = table.number("link_com", _REQUIRED, low=0.0)
+    if com > 1.0:
+        table.fail("link_com", f"must be a fraction of r in [0, 1], got {com!r}")
+    velocity = table.numbers("velocity_limits", _REQUIRED, length=3)
+    if not all(v > 0.0 for v in velocity):
+        table.fail("velocity_limits", f"must all be > 0, got {list(velocity)}")
+    inf = float("inf")
+    lower = table.numbers("position_lower", [-inf] * 3, length=3, infinite=True)
+    upper = table.numbers("position_upper", [inf] * 3, length=3, infinite=True)
+    if not all(lo < hi for lo, hi in zip(lower, upper)):
+        table.fail("position_upper", f"must exceed position_lower element by element, got {list(upper)} "
+                                     f"and {list(lower)}")
+    mechanism = Planar3RRPMechanism(
+        kind=kind, r=_positive(table, "r", _REQUIRED), line_offsets=offsets, link_com=com,
+        link_mass=table.number("link_mass", _REQUIRED, low=0.0),
+        link_inertia=table.number("link_inertia", _REQUIRED, low=0.0),
+        ee_mass=table.number("ee_mass", _REQUIRED, low=0.0),
+        ee_inertia=table.number("ee_inertia", _REQUIRED, low=0.0),
+        velocity_limits=velocity, position_lower=lower, position_upper=upper)
+    if not mechanism.link_inertia_about_origin > 0.0:
+        table.fail("link_inertia", "each link needs a positive moment of inertia about O "
+                                   "(link_inertia + link_mass (link_com r)^2 > 0)")
+    return mechanism
+
+
+#: Readers of ``[mechanism]`` by ``kind``: each validates its own keys (DescriptionError naming them).
+MECHANISMS = {"planar_3rrp": _planar_3rrp}
+
+
 def _choice(table: _Table, selector: str) -> Choice:
     kind = table.string(selector, _REQUIRED)
     return Choice(kind, {k: v for k, v in table.data.items() if k != selector})
@@ -247,26 +373,42 @@ def read(path: str | Path) -> RobotDescription:
     except tomllib.TOMLDecodeError as exc:
         raise DescriptionError(path, "(syntax)", str(exc)) from None
     top = _Table(path, data)
-    top.unknown({"name", "summary", "urdf", "blocks", "task", "configurations", "gravity", "payload",
-                 "gains", "trajectory", "ik"})
+    top.unknown({"name", "summary", "urdf", "mechanism", "blocks", "task", "configurations", "gravity",
+                 "payload", "gains", "trajectory", "ik"})
     name = top.string("name", _REQUIRED)
     if name != path.stem:
         top.fail("name", f"must be the file's name {path.stem!r}, got {name!r}")
-    urdf = path.parent / top.string("urdf", _REQUIRED)
-    if not urdf.is_file():
-        top.fail("urdf", f"no such file {urdf}")
+    mechanism = None
+    mech = top.table("mechanism", None)
+    if mech is None:
+        urdf = path.parent / top.string("urdf", _REQUIRED)
+        if not urdf.is_file():
+            top.fail("urdf", f"no such file {urdf}")
+    else:
+        if "urdf" in data:
+            top.fail("mechanism", "a robot has either a `urdf` or a [mechanism] table, not both")
+        urdf = None
+        kind = mech.string("kind", _REQUIRED)
+        if kind not in MECHANISMS:
+            mech.fail("kind", f"unknown mechanism {kind!r} (known: {', '.join(sorted(MECHANISMS))})")
+        mechanism = MECHANISMS[kind](mech, kind)
     blocks = top.strings("blocks", _REQUIRED)
     for b in blocks:
         if b not in KNOWN_BLOCKS:
             top.fail("blocks", f"unknown block {b!r} (known: {', '.join(KNOWN_BLOCKS)})")
 
     task = top.table("task", _REQUIRED)
-    task.unknown({"frame", "coordinates", "axes"})
-    coordinates = task.strings("coordinates", _REQUIRED)
-    axes = task.numbers("axes", list(range(len(coordinates))), length=len(coordinates))
-    if any(a not in (0.0, 1.0, 2.0) for a in axes) or len(set(axes)) != len(axes):
-        task.fail("axes", f"must be distinct world axes among 0, 1, 2, got {list(axes)}")
-    task_space = TaskSpace(task.string("frame", _REQUIRED), coordinates, tuple(int(a) for a in axes))
+    if mechanism is None:
+        task.unknown({"frame", "coordinates", "axes"})
+        coordinates = task.strings("coordinates", _REQUIRED)
+        axes = task.numbers("axes", list(range(len(coordinates))), length=len(coordinates))
+        if any(a not in (0.0, 1.0, 2.0) for a in axes) or len(set(axes)) != len(axes):
+            task.fail("axes", f"must be distinct world axes among 0, 1, 2, got {list(axes)}")
+        task_space = TaskSpace(task.string("frame", _REQUIRED), coordinates, tuple(int(a) for a in axes))
+    else:                       # the mechanism's own task coordinates: planar x, y along world x, y,
+        task.unknown({"frame", "coordinates"})                       # theta about world z
+        coordinates = task.strings("coordinates", _REQUIRED)
+        task_space = TaskSpace(task.string("frame", "end_effector"), coordinates, (0, 1, 2)[:len(coordinates)])
 
     conf = top.table("configurations", _REQUIRED)
     configurations = {k: conf.numbers(k, _REQUIRED) for k in conf.data}
@@ -300,7 +442,10 @@ def read(path: str | Path) -> RobotDescription:
     if not gains:
         top.fail("gains", "needs at least one gain set, e.g. [gains.pd]")
 
-    trajectory = _choice(top.table("trajectory", _REQUIRED), "profile")
+    trajectory_table = top.table("trajectory", _REQUIRED if "trajectory" in blocks else None)
+    if trajectory_table is not None and "trajectory" not in blocks:
+        top.fail("trajectory", "a [trajectory] table is needed exactly when `blocks` lists 'trajectory'")
+    trajectory = _choice(trajectory_table, "profile") if trajectory_table is not None else None
     ik_table = top.table("ik", None)
     ik = _choice(ik_table, "solver") if ik_table is not None else None
     if ("ik" in blocks) != (ik is not None):
@@ -309,4 +454,5 @@ def read(path: str | Path) -> RobotDescription:
     return RobotDescription(
         name=name, summary=top.string("summary", _REQUIRED), path=path, urdf=urdf, blocks=blocks,
         task=task_space, configurations=configurations, gravity=magnitude,
-        gravity_direction=direction, payload=payload, gains=gains, trajectory=trajectory, ik=ik)
+        gravity_direction=direction, payload=payload, gains=gains, trajectory=trajectory, ik=ik,
+        mechanism=mechanism)

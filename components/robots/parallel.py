@@ -1,0 +1,625 @@
+"""The planar 3-RRP parallel mechanism as a robot model in its actuated coordinates.
+
+Mechanism (robots.md section 5; parameters in the robot's ``[mechanism]`` table). Leg i
+(i = 1, 2, 3) has an actuated revolute joint at the origin O (angle q_i), a link of length r to
+its tip Q_i = r (cos q_i, sin q_i), a passive revolute joint at Q_i and a massless slider by which
+Q_i runs on a line of the end effector. The three lines pass through the end-effector point
+Z = (x, y) at angles phi_i = theta + alpha_i, alpha = (pi/3, pi, -pi/3): three directions 120
+degrees apart. Joint coordinates q = (q1, q2, q3) (rad), task coordinates x = (x, y, theta)
+(m, m, rad). Notation, per leg::
+
+    u_i = (cos phi_i, sin phi_i)      the line's direction
+    n_i = (-sin phi_i, cos phi_i)     its normal (u_i turned by +90 degrees)
+    c_i = cos(q_i - phi_i),  b_i = r sin(q_i - phi_i) = n_i . Q_i
+    s_i = u_i . (Q_i - Z)             the slider extension (m): Q_i = Z + s_i u_i
+    psi_i = phi_i - q_i               the passive revolute joint's angle (line relative to link)
+
+The lines' unit vectors sum to zero, so do their normals, and sum_i n_i n_i^T = 3/2 I.
+
+Forward kinematics (closed form, the Fermat-Torricelli construction: where every s_i > 0 the
+three tips seen from Z lie along rays 120 degrees apart, Z is the Fermat-Torricelli point of the
+triangle Q_1 Q_2 Q_3). The loop closures are n_i . Z = n_i . Q_i (three equations,
+linear in Z). Their sum eliminates Z (sum_i n_i = 0) and leaves one equation in theta,
+sum_i sin(q_i - alpha_i - theta) = 0, so that
+
+    theta = atan2(sum_i sin(q_i - alpha_i), sum_i cos(q_i - alpha_i)),
+
+the direction of V = sum_i exp(j (q_i - alpha_i)); then the consistent linear system gives
+
+    Z = 2/3 sum_i b_i n_i.
+
+theta is fixed by the loop closures only modulo pi (theta and theta + pi give the same three
+lines); the atan2 picks the orientation with sum_i c_i = |V| > 0, i.e. a positive total slider
+extension sum_i s_i = r |V| (the seed's convention, eq. 3: its K and L are 2r times the sine and
+cosine sums above). The seed's eqs. 1-9 give the same pose but divide by its L = 2r sum_i
+cos(q_i - alpha_i), which vanishes wherever theta = +/- pi/2 although nothing is singular there;
+the form above divides by nothing but the constant 3/2. Where |V| <= :data:`DIRECT_SINGULARITY`
+the pose is not determined by q at all (a direct singularity: every theta closes the loops, the
+end effector moves with the actuators locked); :meth:`Planar3RRP.fk` raises ValueError there and
+the vectorized :meth:`Planar3RRP.fk_many` returns NaN.
+
+Inverse kinematics (closed form). Line i lies at signed distance p_i = n_i . Z from O; it meets
+the circle of radius r iff |p_i| <= r, at the two tips Q_i = p_i n_i + w_i u_i,
+w_i = +/- sqrt(r^2 - p_i^2) (w_i = u_i . Q_i = r c_i), so
+
+    q_i = phi_i + atan2(p_i, w_i),    s_i = w_i - u_i . Z.
+
+Branch '+' takes w_i >= 0: the tip farther along u_i, the larger slider extension. Inside the
+disc |Z| < r it is the only positive one (the two extensions have the product |Z|^2 - r^2 < 0);
+outside it the '+' tip is the continuation of that branch (its extension may be negative there:
+with sliders restricted to s_i > 0 no pose outside the disc of radius r would be reachable, while
+the specification's reachable disc, radius 2r/sqrt(3), needs the lines' full length). A branch is
+a string of three signs, one per leg; "+++" is the default, the other seven are options. On
+"+++" every c_i >= 0, so FK(IK(x)) = x (sum_i c_i > 0) and the branch has no direct singularity.
+The seed's eqs. 10-21 return the tips -Q_i (q_i + pi), a configuration whose FK is
+(-x, -y, theta + pi). IK angles are wrapped into [q_ref - pi, q_ref + pi), q_ref the ``home``
+configuration by default, so that the IK of the home pose is home itself.
+
+Reach: a position is reachable (at some theta) iff |Z| <= 2r/sqrt(3); every theta only within r.
+
+Velocities. Differentiating n_i . (Q_i - Z) = 0 gives A xd = B qd with rows A_i = (n_i^T, s_i)
+and B = diag(r c_i), so J = A^-1 B. A is solved in closed form: for A (v, w) = h,
+
+    w = sum_i h_i / sum_i s_i,    v = 2/3 sum_i (h_i - s_i w) n_i,
+
+hence the theta row of J is c_j / sum_i c_i and det J = r^2 prod_i c_i / (sin(alpha_2 - alpha_1)
+sum_i c_i): an inverse (serial) singularity where a link is perpendicular to its line (c_i = 0,
+the line tangent to the circle: q_i moves nothing to first order), a direct one where
+sum_i c_i = 0. Differentiating once more (exact, analytic; no finite differences):
+A xdd = B qdd + h with h_i = -b_i qd_i^2 + 2 b_i thetad qd_i + 2 thetad u_i . Zd, so
+Jdot qd = A^-1 h, and Jdot = A^-1 (Bdot - Adot J) with Bdot = diag(-b_i (qd_i - thetad)) and
+Adot rows (-thetad u_i^T, sd_i), sd_i = -b_i qd_i - u_i . Zd.
+
+Dynamics (the projected, minimal-coordinate form; Kane-like). Links rotate about O (centre of
+mass at link_com r, moment of inertia I_O = I_c + m (link_com r)^2 about O), the end-effector body
+at Z (mass m_E, moment of inertia I_E), the sliders massless. The kinetic energy
+
+    KE = 1/2 sum_i I_O qd_i^2 + 1/2 xd^T M_E xd,   M_E = diag(m_E, m_E, I_E),  xd = J qd,
+
+gives M(q) = I_O 1 + J^T M_E J and, projecting the end effector's Newton-Euler equations with J^T
+(planar: M_E constant, no gyroscopic term), N(q, qd) = J^T M_E Jdot qd, C(q, qd) = J^T M_E Jdot
+(Mdot - 2C = Jdot^T M_E J - J^T M_E Jdot is skew) and g = 0: the mechanism moves in a horizontal
+plane and gravity (along z) does no work. An external wrench f_ext = (Fx, Fy, Mz) on the end
+effector (at Z, world axes) acts as tau_ext = J^T f_ext (:meth:`Planar3RRP.wrench_torque`, and the
+optional ``f_ext`` argument of the dynamics methods):
+
+    M(q) qdd + N(q, qd) = tau + J(q)^T f_ext.
+
+The vectorized ``*_many`` methods take arrays of shape (..., 3) (many configurations, e.g. a
+joint grid; chunk a 200^3 grid to bound memory) and return NaN where undefined; the scalar
+interface methods are thin wrappers on the same code.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+
+from .description import DescriptionError, RobotDescription
+from .model import RobotModel, derivative_unit
+
+__all__ = ["Planar3RRP", "BRANCHES", "DIRECT_SINGULARITY"]
+
+#: |sum_i exp(j (q_i - alpha_i))| (at most 3) at or below this: a direct singularity, no pose.
+DIRECT_SINGULARITY = 1e-12
+#: A line may pass this much (relative to r) beyond the circle and still touch it (round-off).
+REACH_TOLERANCE = 1e-12
+#: IK branches: one sign per leg, '+' the tip farther along the line (larger slider extension).
+BRANCHES = tuple("".join(signs) for signs in itertools.product("+-", repeat=3))
+#: The name of the mechanism's task body (``[task] frame``, ``[payload] frame``).
+TASK_FRAME = "end_effector"
+
+_TWO_PI = 2.0 * math.pi
+
+
+class Planar3RRP(RobotModel):
+    """The planar 3-RRP mechanism (``[mechanism] kind = "planar_3rrp"``) in actuated coordinates.
+
+    Parameters
+    ----------
+    description : RobotDescription
+        With a :class:`~robofmu.components.robots.description.Planar3RRPMechanism`.
+    gravity : float, optional
+        Magnitude (m/s^2); stored for the interface, it has no effect (gravity acts along z,
+        perpendicular to the plane of motion; a description whose gravity direction has a
+        component in the plane is refused).
+
+    Attributes (beyond :class:`RobotModel`)
+    ----------
+    r : float
+        Link length (m).
+    alpha : ndarray, shape (3,)
+        Line angle offsets (rad).
+    link_inertia_O : float
+        Each link's moment of inertia about O (kg m^2).
+    payload : float
+        Point mass (kg) carried at Z (:meth:`set_payload`).
+    """
+
+    kind = "planar_3rrp"
+
+    def __init__(self, description: RobotDescription, gravity: float | None = None):
+        mech = description.mechanism
+        path = description.path
+        if mech is None or mech.kind != self.kind:
+            raise ValueError(f"{path}: mechanism: robot {description.name!r} is not a {self.kind!r} mechanism")
+        self.description = description
+        self.mechanism = mech
+        self.n = self.m = 3
+        self.prismatic = [False, False, False]
+        self.joint_names = ["leg1", "leg2", "leg3"]
+        self.r = float(mech.r)
+        self.alpha = np.array(mech.line_offsets, dtype=float)
+        self._sin_offsets = math.sin(self.alpha[1] - self.alpha[0])      # +/- sqrt(3)/2
+        self._cos_alpha, self._sin_alpha = np.cos(self.alpha), np.sin(self.alpha)
+        self.link_inertia_O = float(mech.link_inertia_about_origin)
+        self._ee_mass, self._ee_inertia = float(mech.ee_mass), float(mech.ee_inertia)
+        self._lower = np.array(mech.position_lower, dtype=float)
+        self._upper = np.array(mech.position_upper, dtype=float)
+        self._velocity = np.array(mech.velocity_limits, dtype=float)
+        home = description.configuration("home")
+        if len(home) != self.n:
+            raise DescriptionError(path, "configurations.home", f"needs {self.n} joint values (the mechanism "
+                                   f"has {self.n} actuated joints), got {len(home)}")
+        if len(description.task.coordinates) != self.m:
+            raise DescriptionError(path, "task.coordinates", f"needs {self.m} names (the pose x, y, theta), "
+                                   f"got {list(description.task.coordinates)}")
+        if description.task.frame != TASK_FRAME:
+            raise DescriptionError(path, "task.frame", f"the mechanism's task body is {TASK_FRAME!r}, "
+                                   f"got {description.task.frame!r}")
+        direction = description.gravity_direction
+        if abs(direction[0]) > 1e-12 or abs(direction[1]) > 1e-12:
+            raise DescriptionError(path, "gravity.direction", "the mechanism moves in the horizontal x-y "
+                                   f"plane: gravity must act along z, got {list(direction)}")
+        if description.payload is not None and description.payload.frame != TASK_FRAME:
+            raise DescriptionError(path, "payload.frame", f"a payload rides on {TASK_FRAME!r}, got "
+                                   f"{description.payload.frame!r}")
+        if not np.all((self._lower <= home) & (np.asarray(home) <= self._upper)):
+            raise DescriptionError(path, "configurations.home", f"q = {list(home)} lies outside the position "
+                                   f"limits {self._lower.tolist()} to {self._upper.tolist()}")
+        if not self._direct_measure(np.asarray(home)) > DIRECT_SINGULARITY:
+            raise DescriptionError(path, "configurations.home", f"q = {list(home)} is a direct singularity "
+                                   "(no pose)")
+        self.payload = 0.0
+        self.set_gravity(description.gravity if gravity is None else gravity)
+
+    # -- units, limits, parameters ----------------------------------------------------------------
+    def task_units(self, order: int = 0) -> list[str]:
+        return [derivative_unit("m", order), derivative_unit("m", order), derivative_unit("rad", order)]
+
+    def position_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """The ``[mechanism]`` position limits (rad), -inf / +inf where there are none."""
+        return self._lower.copy(), self._upper.copy()
+
+    def velocity_limits(self) -> np.ndarray:
+        """The ``[mechanism]`` velocity limits (rad/s)."""
+        return self._velocity.copy()
+
+    def set_gravity(self, magnitude: float) -> None:
+        """Store the magnitude (m/s^2); no effect: gravity is perpendicular to the plane of motion."""
+        self.gravity = float(magnitude)
+
+    def set_payload(self, mass: float) -> None:
+        """Carry a point mass (kg) at Z (it adds to the end effector's mass, not to its inertia);
+        0 removes it. Only where the description has a ``[payload]``."""
+        mass = float(mass)
+        if mass == self.payload:
+            return
+        if self.description.payload is None:
+            raise ValueError(f"robot {self.description.name!r} describes no payload frame")
+        if not (math.isfinite(mass) and mass >= 0.0):
+            raise ValueError(f"payload mass must be finite and >= 0 kg, got {mass}")
+        self.payload = mass
+
+    @property
+    def end_effector_inertia(self) -> np.ndarray:
+        """diag(M_E) = (m_E, m_E, I_E) with the payload, shape (3,)."""
+        m = self._ee_mass + self.payload
+        return np.array([m, m, self._ee_inertia])
+
+    # -- geometry: leg-first arrays ------------------------------------------------------------------
+    # Internally every per-leg quantity has the leg on axis 0 and the configurations on the
+    # trailing axes, shape (3, ...): per-configuration quantities (x, y, theta, ...) of shape (...)
+    # then broadcast against them, and NumPy's inner loops run over the configurations, not over
+    # three legs. A single configuration is the case ... = ().
+    def _legwise(self, v: np.ndarray, nd: int) -> np.ndarray:
+        """A per-leg constant (3,) shaped (3, 1, ...) for ``nd`` configuration axes."""
+        return v.reshape((3,) + (1,) * nd)
+
+    def _direct_measure(self, q: np.ndarray) -> np.ndarray:
+        """|V| = |sum_i exp(j (q_i - alpha_i))| = sum_i c_i for q (..., 3): 0 at a direct
+        singularity, at most 3."""
+        d = np.moveaxis(np.asarray(q, dtype=float), -1, 0) - self._legwise(self.alpha, np.ndim(q) - 1)
+        return np.hypot(np.sin(d).sum(0), np.cos(d).sum(0))
+
+    def _pose(self, qT: np.ndarray):
+        """(sd, cd, V, S, C, theta, x, y) at leg-first qT (3, ...): sd, cd = sin, cos(q_i - alpha_i)
+        (the only trigonometric evaluations), S, C their sums, V = hypot(S, C); NaN where V is at
+        or below :data:`DIRECT_SINGULARITY`.
+
+        With cos, sin theta = C/V, S/V the sums of Z = 2/3 sum_i b_i n_i are quadratic forms in
+        (C, S) over V^2, with the coefficients A1, A2 = sum_i sd_i (cos, sin) alpha_i and
+        B1, B2 = sum_i cd_i (cos, sin) alpha_i."""
+        nd = qT.ndim - 1
+        ca, sa = self._legwise(self._cos_alpha, nd), self._legwise(self._sin_alpha, nd)
+        d = qT - self._legwise(self.alpha, nd)
+        sd, cd = np.sin(d), np.cos(d)
+        S, C = sd.sum(0), cd.sum(0)
+        A1, A2 = (sd * ca).sum(0), (sd * sa).sum(0)
+        B1, B2 = (cd * ca).sum(0), (cd * sa).sum(0)
+        V2 = S * S + C * C
+        V2 = np.where(V2 > DIRECT_SINGULARITY ** 2, V2, np.nan)
+        CS, CC, SS = C * S, C * C, S * S
+        k = (2.0 * self.r / 3.0) / V2
+        x = -k * (CS * (A1 - B2) + CC * A2 - SS * B1)
+        y = k * (CC * A1 - CS * (A2 + B1) + SS * B2)
+        theta = np.arctan2(S, C) + 0.0 * V2             # NaN where singular
+        return sd, cd, np.sqrt(V2), S, C, theta, x, y
+
+    def _directions(self, V, S, C, nd):
+        """(cp, sp): cos, sin phi_i = cos, sin(theta + alpha_i), shape (3, ...)."""
+        ca, sa = self._legwise(self._cos_alpha, nd), self._legwise(self._sin_alpha, nd)
+        ct, st = C / V, S / V
+        return ct * ca - st * sa, st * ca + ct * sa
+
+    def _legs(self, qT: np.ndarray) -> "_Legs":
+        """Everything the kinematics needs at leg-first qT (see the module docstring's notation)."""
+        sd, cd, V, S, C, theta, x, y = self._pose(qT)
+        cp, sp = self._directions(V, S, C, qT.ndim - 1)   # u = (cp, sp), n = (-sp, cp)
+        ct, st = C / V, S / V
+        c = cd * ct + sd * st                             # cos(q_i - phi_i)
+        b = self.r * (sd * ct - cd * st)                  # r sin(q_i - phi_i)
+        s = self.r * c - (cp * x + sp * y)
+        return _Legs(theta, V, x, y, cp, sp, c, b, s)
+
+    def _jacobian_from(self, V, x, y, cp, sp, c) -> np.ndarray:
+        """J = A^-1 B written out, shape (3, 3, ...): theta row gamma_j = c_j / sum_i c_i
+        (sum_i c_i = V), Z rows 2/3 (r c_j n_j - gamma_j sum_i s_i n_i), where
+        sum_i s_i n_i = r sum_i c_i n_i - 3/2 (-y, x) (sum_i n_i u_i^T = 3/2 [[0, -1], [1, 0]])."""
+        J = np.empty((3,) + c.shape)
+        gamma = np.divide(c, V, out=J[2])
+        rc = (2.0 * self.r / 3.0) * c
+        snx = (2.0 / 3.0) * (-self.r * (c * sp).sum(0) + 1.5 * y)
+        sny = (2.0 / 3.0) * (self.r * (c * cp).sum(0) - 1.5 * x)
+        np.subtract(-rc * sp, gamma * snx, out=J[0])
+        np.subtract(rc * cp, gamma * sny, out=J[1])
+        return J
+
+    def _jacobian(self, k: "_Legs") -> np.ndarray:
+        return self._jacobian_from(k.V, k.x, k.y, k.cp, k.sp, k.c)
+
+    def _solve_a(self, k: "_Legs", h: np.ndarray) -> np.ndarray:
+        """A^-1 h, A rows (n_i^T, s_i): h has the legs on axis 0, optionally a column axis, then
+        the configuration axes; returns rows (x, y, theta) on axis 0 and the rest alike.
+
+        Summing the rows (sum_i n_i = 0) gives w = sum_i h_i / sum_i s_i; then n_i . v = h_i - s_i w
+        is consistent and v = 2/3 sum_i (h_i - s_i w) n_i (sum_i n_i n_i^T = 3/2 I)."""
+        extra = (slice(None),) + (None,) * (h.ndim - k.s.ndim)
+        s, cp, sp = k.s[extra], k.cp[extra], k.sp[extra]
+        w = h.sum(0) / s.sum(0)
+        hp = h - s * w
+        return np.stack([-(2.0 / 3.0) * (hp * sp).sum(0), (2.0 / 3.0) * (hp * cp).sum(0), w])
+
+    @staticmethod
+    def _times(J: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """J v for leg-first J (3, 3, ...) and v (3, ...)."""
+        return (J * v[None]).sum(1)
+
+    def _jdot_qdot(self, k: "_Legs", J: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Jdot qd = A^-1 h, h_i = -b_i qd_i^2 + 2 b_i thetad qd_i + 2 thetad u_i . Zd."""
+        zx, zy, thd = self._times(J, qd)
+        h = -k.b * qd * qd + 2.0 * k.b * thd * qd + 2.0 * thd * (k.cp * zx + k.sp * zy)
+        return self._solve_a(k, h)
+
+    def _jacobian_dot(self, k: "_Legs", J: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Jdot = A^-1 (Bdot - Adot J), Bdot = diag(-b_i (qd_i - thetad)), Adot rows
+        (-thetad u_i^T, sd_i), sd_i = -b_i qd_i - u_i . Zd; shape (3, 3, ...)."""
+        zx, zy, thd = self._times(J, qd)
+        bdot = -k.b * (qd - thd)
+        sdot = -k.b * qd - (k.cp * zx + k.sp * zy)
+        adot_j = (-thd * (k.cp[:, None] * J[0][None] + k.sp[:, None] * J[1][None])
+                  + sdot[:, None] * J[2][None])                      # (leg i, column j, ...)
+        eye = np.eye(3).reshape((3, 3) + (1,) * (qd.ndim - 1))
+        return self._solve_a(k, eye * bdot[:, None] - adot_j)
+
+    # -- vectorized kinematics: shapes (..., 3) in, (..., 3) or (..., 3, 3) out ---------------------
+    @staticmethod
+    def _legs_first(a) -> np.ndarray:
+        a = np.asarray(a, dtype=float)
+        if a.shape[-1:] != (3,):
+            raise ValueError(f"needs arrays of shape (..., 3), got {a.shape}")
+        return np.ascontiguousarray(np.moveaxis(a, -1, 0))   # each leg's values contiguous
+
+    @staticmethod
+    def _vector_last(a: np.ndarray) -> np.ndarray:
+        return np.moveaxis(a, 0, -1)
+
+    @staticmethod
+    def _matrix_last(a: np.ndarray) -> np.ndarray:
+        return np.moveaxis(a, (0, 1), (-2, -1))
+
+    def fk_many(self, q) -> np.ndarray:
+        """Poses (x, y, theta) of configurations q, shape (..., 3) -> (..., 3); NaN at a direct
+        singularity. theta in (-pi, pi]."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            _, _, _, _, _, theta, x, y = self._pose(self._legs_first(q))
+        return np.stack([x, y, theta], axis=-1)
+
+    def jacobian_many(self, q) -> np.ndarray:
+        """J(q), shape (..., 3) -> (..., 3, 3); NaN at a direct singularity."""
+        qT = self._legs_first(q)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sd, cd, V, S, C, _, x, y = self._pose(qT)
+            cp, sp = self._directions(V, S, C, qT.ndim - 1)
+            return self._matrix_last(self._jacobian_from(V, x, y, cp, sp, (cd * C + sd * S) / V))
+
+    def jdot_qdot_many(self, q, qd) -> np.ndarray:
+        """Jdot(q, qd) qd, shapes (..., 3) -> (..., 3)."""
+        qdT = self._legs_first(qd)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = self._legs(self._legs_first(q))
+            return self._vector_last(self._jdot_qdot(k, self._jacobian(k), qdT))
+
+    def jacobian_dot_many(self, q, qd) -> np.ndarray:
+        """Jdot(q, qd) = dJ/dt along qd, shapes (..., 3) -> (..., 3, 3)."""
+        qdT = self._legs_first(qd)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = self._legs(self._legs_first(q))
+            return self._matrix_last(self._jacobian_dot(k, self._jacobian(k), qdT))
+
+    def jacobian_determinant_many(self, q) -> np.ndarray:
+        """det J = r^2 prod_i c_i / (sin(alpha_2 - alpha_1) sum_i c_i), shape (..., 3) -> (...):
+        0 at an inverse singularity (c_i = 0), NaN at a direct one."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sd, cd, V, S, C, _, _, _ = self._pose(self._legs_first(q))
+            c = (cd * C + sd * S) / V
+            return self.r ** 2 * c.prod(0) / (self._sin_offsets * V)
+
+    def singular_values_many(self, q, theta_scale: float = 1.0, exact: bool = False) -> np.ndarray:
+        """Singular values of J (descending), shape (..., 3) -> (..., 3), with the theta row
+        multiplied by ``theta_scale`` (m: a characteristic length makes every row m/rad); NaN at a
+        direct singularity.
+
+        ``exact``: LAPACK's SVD per configuration (slow over millions). Default: closed form, the
+        largest eigenvalue of J^T J (trigonometric solution of the 3 x 3 symmetric eigenproblem)
+        for sigma_max, the same of J^-T J^-1 with J^-1 = B^-1 A (closed form) for sigma_min, and
+        sigma_mid = |det J| / (sigma_max sigma_min); it agrees with LAPACK to about 1e-11
+        relative over random configurations (characteristic-polynomial roots can lose accuracy
+        where two singular values nearly coincide; the tests bound the difference by 1e-7);
+        sigma_min = 0 where a link is perpendicular to its line.
+        """
+        L = float(theta_scale)
+        qT = self._legs_first(q)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            k = self._legs(qT)
+            J = self._jacobian(k)
+            J[2] *= L
+            if exact:
+                Jm = self._matrix_last(J)
+                out = np.full(Jm.shape[:-1], np.nan)
+                finite = np.isfinite(Jm).all(axis=(-2, -1))
+                out[finite] = np.linalg.svd(Jm[finite], compute_uv=False)
+                return out
+            top = np.sqrt(_largest_eigenvalue(_gram(J)))
+            # J^-1 = B^-1 A: row i (n_i^T, s_i / L) / (r c_i)
+            rc = self.r * k.c
+            inverse = np.stack([-k.sp / rc, k.cp / rc, k.s / (L * rc)], axis=1)    # (leg i, column, ...)
+            inv_top = np.sqrt(_largest_eigenvalue(_gram(inverse)))
+            low = np.where(np.isfinite(inv_top) & (k.c != 0.0).all(0), 1.0 / inv_top, 0.0) + 0.0 * top
+            det = np.abs(L * self.r ** 2 * k.c.prod(0) / (self._sin_offsets * k.V))
+            trace = (J * J).sum((0, 1))
+            mid = np.where(low > 0.0, det / (top * low), np.sqrt(np.clip(trace - top * top, 0.0, None)))
+            return np.stack([top, mid, low], axis=-1)
+
+    def condition_number_many(self, q, theta_scale: float = 1.0, exact: bool = False) -> np.ndarray:
+        """cond(J) = sigma_max / sigma_min, shape (..., 3) -> (...); inf at an inverse singularity,
+        NaN at a direct one (see :meth:`singular_values_many`)."""
+        sv = self.singular_values_many(q, theta_scale, exact)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return sv[..., 0] / sv[..., 2]
+
+    def line_distances_many(self, pose) -> np.ndarray:
+        """Signed distances p_i = n_i . Z (m) of the three lines from O, shape (..., 3) -> (..., 3):
+        the pose is reachable iff every |p_i| <= r."""
+        x, y, th = self._legs_first(pose)
+        phi = th + self._legwise(self.alpha, np.ndim(th))
+        return self._vector_last(-x * np.sin(phi) + y * np.cos(phi))
+
+    def ik_many(self, pose, branch: str = "+++", near=None) -> np.ndarray:
+        """Joint angles for poses, shape (..., 3) -> (..., 3); NaN rows where unreachable.
+
+        ``branch``: one sign per leg (:data:`BRANCHES`); angles wrapped into
+        [near - pi, near + pi), ``near`` (3,) or (..., 3), by default the home configuration.
+        """
+        signs = _branch_signs(branch)
+        x, y, th = self._legs_first(pose)
+        nd = np.ndim(th)
+        phi = th + self._legwise(self.alpha, nd)
+        cp, sp = np.cos(phi), np.sin(phi)
+        ratio = (-x * sp + y * cp) / self.r                               # p_i / r
+        reach = (np.abs(ratio) <= 1.0 + REACH_TOLERANCE).all(0)
+        w = self._legwise(signs, nd) * np.sqrt(np.clip(1.0 - ratio * ratio, 0.0, None))
+        q = phi + np.arctan2(np.clip(ratio, -1.0, 1.0), w)
+        ref = self._legs_first(self.configuration("home") if near is None else near)
+        if ref.ndim == 1:
+            ref = self._legwise(ref, nd)
+        q = ref + np.mod(q - ref + math.pi, _TWO_PI) - math.pi
+        return self._vector_last(np.where(reach, q, np.nan))
+
+    def slider_extensions_many(self, q) -> np.ndarray:
+        """s_i = u_i . (Q_i - Z) (m), shape (..., 3) -> (..., 3)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self._vector_last(self._legs(self._legs_first(q)).s)
+
+    def passive_joints(self, q, qd=None) -> dict[str, np.ndarray]:
+        """The passive joints (vectorized, shapes (..., 3)): slider extensions ``s`` (m) and the
+        passive revolute angles ``psi`` = phi_i - q_i (rad, the line relative to the link, in
+        [-pi, pi)), and with ``qd`` their rates ``sd`` = u_i . (Qd_i - Zd) (m/s) and
+        ``psid`` = thetad - qd_i (rad/s)."""
+        qT = self._legs_first(q)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = self._legs(qT)
+            out = {"s": k.s, "psi": -np.arctan2(k.b, self.r * k.c)}
+            if qd is not None:
+                qdT = self._legs_first(qd)
+                zx, zy, thd = self._times(self._jacobian(k), qdT)
+                out["sd"] = -k.b * qdT - (k.cp * zx + k.sp * zy)
+                out["psid"] = thd - qdT
+        return {name: self._vector_last(value) for name, value in out.items()}
+
+    # -- the interface: kinematics ------------------------------------------------------------------
+    def _checked(self, q) -> "_Legs":
+        q = np.asarray(q, dtype=float)
+        if q.shape != (3,):
+            raise ValueError(f"q: needs 3 joint angles, got shape {q.shape}")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = self._legs(q)
+        if not np.isfinite(k.theta):
+            raise ValueError(f"q = {q.tolist()} rad is a direct singularity of the {self.kind} mechanism "
+                             f"(|sum_i exp(j (q_i - alpha_i))| = {float(self._direct_measure(q)):.3g}): "
+                             "the pose is not determined by q")
+        return k
+
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """Pose (x, y, theta), theta in (-pi, pi]; ValueError at a direct singularity."""
+        k = self._checked(q)
+        return np.array([float(k.x), float(k.y), float(k.theta)])
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        return self._jacobian(self._checked(q))
+
+    def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        k = self._checked(q)
+        return self._jdot_qdot(k, self._jacobian(k), np.asarray(qd, dtype=float))
+
+    def jacobian_dot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """dJ/dt along qd, shape (3, 3)."""
+        k = self._checked(q)
+        return self._jacobian_dot(k, self._jacobian(k), np.asarray(qd, dtype=float))
+
+    def jacobian_determinant(self, q: np.ndarray) -> float:
+        """det J(q): 0 at an inverse singularity, unbounded near a direct one."""
+        self._checked(q)
+        return float(self.jacobian_determinant_many(q))
+
+    def condition_number(self, q: np.ndarray, theta_scale: float = 1.0) -> float:
+        """cond(J(q)) (2-norm, LAPACK's SVD), theta row scaled by ``theta_scale``: the singularity
+        measure, inf at an inverse singularity."""
+        self._checked(q)
+        return float(self.condition_number_many(q, theta_scale, exact=True))
+
+    def ik(self, pose, branch: str = "+++", near=None) -> np.ndarray:
+        """Joint angles placing the end effector at ``pose`` on ``branch`` (see :meth:`ik_many`);
+        ValueError naming the leg whose line misses the circle."""
+        pose = np.asarray(pose, dtype=float)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise ValueError(f"pose: needs 3 finite values (x, y, theta), got {pose.tolist()}")
+        q = self.ik_many(pose, branch, near)
+        if not np.all(np.isfinite(q)):
+            p = self.line_distances_many(pose)
+            i = int(np.argmax(np.abs(p)))
+            x, y, th = pose.tolist()
+            raise ValueError(
+                f"pose ({x:.6g} m, {y:.6g} m, {th:.6g} rad) is out of reach: line {i + 1} passes "
+                f"{abs(p[i]):.6g} m from O, beyond r = {self.r:g} m (positions within 2r/sqrt(3) = "
+                f"{2.0 * self.r / math.sqrt(3.0):.6g} m of O are reachable at some orientations, "
+                f"within r at every orientation; this one is {math.hypot(x, y):.6g} m away)")
+        return q
+
+    # -- the interface: dynamics --------------------------------------------------------------------
+    def _terms(self, q, qd):
+        k = self._checked(q)
+        J = self._jacobian(k)
+        qd = np.asarray(qd, dtype=float)
+        return J, self._jdot_qdot(k, J, qd)
+
+    def _mass(self, J: np.ndarray) -> np.ndarray:
+        G = J.T @ (self.end_effector_inertia[:, None] * J)
+        return self.link_inertia_O * np.eye(3) + 0.5 * (G + G.T)          # exactly symmetric
+
+    def wrench_torque(self, q: np.ndarray, f_ext) -> np.ndarray:
+        """Joint torques (N m) equivalent to the wrench f_ext = (Fx, Fy, Mz) (N, N, N m) on the end
+        effector at Z, world axes: J(q)^T f_ext."""
+        return self.jacobian(q).T @ np.asarray(f_ext, dtype=float)
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """M(q) = I_O 1 + J^T M_E J."""
+        return self._mass(self.jacobian(q))
+
+    def coriolis_matrix(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """C(q, qd) = J^T M_E Jdot (C qd = N; Mdot - 2C skew)."""
+        J = self.jacobian(q)
+        return J.T @ (self.end_effector_inertia[:, None] * self.jacobian_dot(q, qd))
+
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        """Zero: gravity is perpendicular to the plane of motion."""
+        return np.zeros(3)
+
+    def nonlinear_effects(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """N(q, qd) = J^T M_E Jdot qd (g = 0)."""
+        J, a = self._terms(q, qd)
+        return J.T @ (self.end_effector_inertia * a)
+
+    def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
+                         f_ext: np.ndarray | None = None) -> np.ndarray:
+        """qdd = M^-1 (tau + J^T f_ext - N); ``f_ext`` = (Fx, Fy, Mz) on the end effector (default 0)."""
+        J, a = self._terms(q, qd)
+        rhs = np.asarray(tau, dtype=float) - J.T @ (self.end_effector_inertia * a)
+        if f_ext is not None:
+            rhs = rhs + J.T @ np.asarray(f_ext, dtype=float)
+        return np.linalg.solve(self._mass(J), rhs)
+
+    def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                         f_ext: np.ndarray | None = None) -> np.ndarray:
+        """tau = M qdd + N - J^T f_ext."""
+        J, a = self._terms(q, qd)
+        tau = self._mass(J) @ np.asarray(qdd, dtype=float) + J.T @ (self.end_effector_inertia * a)
+        if f_ext is not None:
+            tau = tau - J.T @ np.asarray(f_ext, dtype=float)
+        return tau
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        """1/2 sum_i I_O qd_i^2 + 1/2 xd^T M_E xd (J)."""
+        qd = np.asarray(qd, dtype=float)
+        xd = self.jacobian(q) @ qd
+        return float(0.5 * self.link_inertia_O * qd @ qd + 0.5 * xd @ (self.end_effector_inertia * xd))
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        """Zero: gravity does no work in the horizontal plane."""
+        return 0.0
+
+
+class _Legs:
+    """The per-leg quantities at one or many configurations (see the module docstring)."""
+
+    __slots__ = ("theta", "V", "x", "y", "cp", "sp", "c", "b", "s")
+
+    def __init__(self, theta, V, x, y, cp, sp, c, b, s):
+        self.theta, self.V, self.x, self.y = theta, V, x, y
+        self.cp, self.sp, self.c, self.b, self.s = cp, sp, c, b, s
+
+
+def _branch_signs(branch: str) -> np.ndarray:
+    if branch not in BRANCHES:
+        raise ValueError(f"branch {branch!r} is invalid: must be one of {', '.join(BRANCHES)}")
+    return np.array([1.0 if ch == "+" else -1.0 for ch in branch])
+
+
+def _gram(K: np.ndarray) -> np.ndarray:
+    """K^T K for leg-first K (3 rows, 3 columns, ...): shape (3, 3, ...)."""
+    return (K[:, :, None] * K[:, None, :]).sum(0)
+
+
+def _largest_eigenvalue(G: np.ndarray) -> np.ndarray:
+    """Largest eigenvalue of symmetric 3 x 3 matrices G (3, 3, ...), in closed form (the
+    trigonometric solution of the characteristic cubic); NaN where G is not finite."""
+    q = (G[0, 0] + G[1, 1] + G[2, 2]) / 3.0
+    off = G[0, 1] ** 2 + G[0, 2] ** 2 + G[1, 2] ** 2
+    p = np.sqrt(((G[0, 0] - q) ** 2 + (G[1, 1] - q) ** 2 + (G[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a, b, c = (G[0, 0] - q) / p, (G[1, 1] - q) / p, (G[2, 2] - q) / p
+        d, e, f = G[0, 1] / p, G[0, 2] / p, G[1, 2] / p
+        half_det = 0.5 * (a * (b * c - f * f) - d * (d * c - f * e) + e * (d * f - b * e))
+        phi = np.arccos(np.clip(half_det, -1.0, 1.0)) / 3.0
+    return np.where(p > 0.0, q + 2.0 * p * np.cos(phi), q)

@@ -144,6 +144,19 @@ def tutorial_lines(section: dict, out: Path) -> list[str]:
             f"![residual per iteration]({figure.name})", ""]
 
 
+def workspace_section(entry: dict, out: Path) -> list[str]:
+    """A workspace study (:mod:`robofmu.system.workspace`): its report as a section, its figures
+    in ``out/<study>/``."""
+    from . import workspace
+
+    study = workspace.read_study(STUDIES_DIR / entry["study"])
+    _say(f"workspace study: {study.path.name}")
+    result = workspace.run(study, progress=lambda line: _say("  " + line))
+    folder = out / study.path.stem
+    made = workspace.figures(result, folder)
+    return workspace.report_lines(result, made, level=2, prefix=f"{folder.name}/")
+
+
 def accuracy_section(plan: dict, out: Path, fmu_dir, quick: bool) -> list[str]:
     """Co-simulation error against the monolithic reference versus the communication step."""
     from .convergence import study
@@ -242,6 +255,8 @@ def demo(out: Path, fmu_dir: str | Path = "fmus", quick: bool = False) -> int:
             lines, rows = experiment_section(section, out, fmu_dir)
             body += lines
             summary += rows
+        for entry in plan.get("workspace", []):
+            body += workspace_section(entry, out)
         body += accuracy_section(plan["accuracy"], out, fmu_dir, quick)
         body += step_section(plan["step_response"], out, fmu_dir)
         table = markdown_table(summary, ["experiment (1 ms, Gauss-Seidel)", "max joint error",

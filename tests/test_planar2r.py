@@ -16,8 +16,8 @@ from functools import lru_cache
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
+import lagrange_checks
 from robofmu.components.ik import Unreachable, solver_class
 from robofmu.components.robots import ROBOTS_DIR, load_description, load_model
 from robofmu.components.robots.description import read
@@ -143,17 +143,7 @@ def ref(name, q, qd=np.zeros(2), g=G0):
 
 
 def test_mass_coriolis_gravity_match_lagrange(model):
-    err_m = err_c = err_g = err_n = 0.0
-    for q, qd in zip(Q_SAMPLES, QD_SAMPLES):
-        err_m = max(err_m, np.max(np.abs(model.mass_matrix(q) - ref("M", q))))
-        err_c = max(err_c, np.max(np.abs(model.coriolis_matrix(q, qd) - ref("C", q, qd))))
-        err_g = max(err_g, np.max(np.abs(model.gravity_torque(q) - ref("g", q).ravel())))
-        err_n = max(err_n, np.max(np.abs(model.nonlinear_effects(q, qd)
-                                         - ref("C", q, qd) @ qd - ref("g", q).ravel())))
-    assert err_m < 1e-12, err_m
-    assert err_c < 1e-12, err_c              # Pinocchio's C is the Christoffel one here
-    assert err_g < 1e-12, err_g
-    assert err_n < 1e-12, err_n
+    lagrange_checks.assert_mass_coriolis_gravity_match(model, ref, Q_SAMPLES, QD_SAMPLES)
 
 
 def test_hand_values(model):
@@ -170,41 +160,14 @@ def test_hand_values(model):
 
 
 def test_energies_and_the_dynamics_are_consistent(model):
-    for q, qd in zip(Q_SAMPLES, QD_SAMPLES):
-        T = model.kinetic_energy(q, qd)
-        assert T == pytest.approx(0.5 * qd @ model.mass_matrix(q) @ qd, rel=1e-13)
-        assert T == pytest.approx(float(ref("T", q, qd)), rel=1e-12)
-        assert model.potential_energy(q) == pytest.approx(float(ref("V", q)), abs=1e-12)
-        tau = RNG.uniform(-5, 5, 2)
-        qdd = model.forward_dynamics(q, qd, tau)
-        np.testing.assert_allclose(model.inverse_dynamics(q, qd, qdd), tau, atol=1e-12)
-        np.testing.assert_allclose(model.mass_matrix(q) @ qdd + model.nonlinear_effects(q, qd), tau,
-                                   atol=1e-12)
-    # Mdot - 2C is skew
-    eps = 1e-6
-    for q, qd in zip(Q_SAMPLES, QD_SAMPLES):
-        Mdot = (model.mass_matrix(q + eps * qd) - model.mass_matrix(q - eps * qd)) / (2 * eps)
-        S = Mdot - 2 * model.coriolis_matrix(q, qd)
-        assert np.max(np.abs(S + S.T)) < 1e-9
+    lagrange_checks.assert_energies_and_dynamics_consistent(model, ref, Q_SAMPLES, QD_SAMPLES, RNG)
 
 
 def test_energy_conserved_under_gravity_with_zero_torque(model):
-    q0, qd0 = np.array([0.3, 0.8]), np.array([1.0, -2.0])
-
-    def f(_, x):
-        return np.concatenate([x[2:], model.forward_dynamics(x[:2], x[2:], np.zeros(2))])
-
-    sol = solve_ivp(f, (0.0, 2.0), np.concatenate([q0, qd0]), method="DOP853", rtol=1e-10,
-                    atol=1e-12, t_eval=np.linspace(0.0, 2.0, 201))
-    assert sol.success
-    energy = np.array([float(ref("T", x[:2], x[2:]) + ref("V", x[:2])) for x in sol.y.T])
-    scale = abs(energy[0]) + model.kinetic_energy(q0, qd0)
-    assert np.max(np.abs(energy - energy[0])) / scale < 1e-7
-    assert np.max(np.abs(sol.y[:2, -1] - q0)) > 0.1              # it really swung
+    lagrange_checks.assert_energy_conserved_without_torque(
+        model, ref, q0=np.array([0.3, 0.8]), qd0=np.array([1.0, -2.0]), duration=2.0)
 
 
-# =============================================================================================
-# 3. Closed-form IK (planar_elbow)
 # =============================================================================================
 
 def solver(m, elbow="down"):

@@ -71,8 +71,8 @@ def test_simulate_fmu_ik_and_controller(fmu_dir):
     assert res[-1]["reachable"]
     res = simulate_fmu(str(fmu_dir / "controller.fmu"), stop_time=0.01, step_size=1e-3,
                        output=[f"tau[{i}]" for i in range(1, 5)])
-    np.testing.assert_allclose([res[-1][f"tau[{i}]"] for i in range(1, 5)],
-                               robot.gravity_torque(np.zeros(4)), atol=1e-12)
+    np.testing.assert_allclose([res[-1][f"tau[{i}]"] for i in range(1, 5)],           # q = q_ref = home
+                               robot.gravity_torque(robot.configuration("home")), atol=1e-12)
 
 
 def test_feedthrough_outputs_follow_inputs_without_a_step(fmu_dir):

@@ -85,8 +85,9 @@ def _is_base(path: Path) -> bool:
 
 
 def available() -> list[str]:
-    """Names of the runnable experiments (bases that only hold a diagram are excluded)."""
-    return [p.stem for p in sorted(EXPERIMENTS_DIR.glob("*.toml")) if not _is_base(p)]
+    """Names of the runnable experiments, sorted by name (a name before its variants:
+    ``a``, ``a-b``); bases that only hold a diagram are excluded."""
+    return sorted(p.stem for p in EXPERIMENTS_DIR.glob("*.toml") if not _is_base(p))
 
 
 def _path(name_or_path: str | Path) -> Path:

@@ -123,6 +123,38 @@ def efforts(result: Result, roles: Roles, path: Path, title: str) -> Path:
     return _save(fig, path)
 
 
+def pose(result: Result, roles: Roles, path: Path, title: str) -> Path:
+    """The measured task coordinates (role ``x``) over time, one row per coordinate: beside the
+    task reference and with the error x_ref - x where the run has an ``x_ref`` role, else with the
+    departure x - x(0) from the start."""
+    roles.require("x")
+    x = roles.vector(result, "x")
+    x_ref = roles.vector(result, "x_ref") if roles.x_ref else None
+    coordinates = roles.model().task_coordinates
+    m = x.shape[1]
+    fig, axes = plt.subplots(m, 2, figsize=(11, 2.2 * m), sharex=True, squeeze=False)
+    for i in range(m):
+        unit = result.units.get(f"{roles.x}[{i + 1}]")
+        factor, small_unit = small(unit)
+        name = coordinates[i] if i < len(coordinates) else f"x{i + 1}"
+        ax = axes[i, 0]
+        if x_ref is not None:
+            ax.plot(result.time, x_ref[:, i], color="0.5", lw=3, label="reference")
+        ax.plot(result.time, x[:, i], color=COLORS[i % len(COLORS)], lw=1, label="measured")
+        ax.set_ylabel(f"{name} ({printed(unit)})")
+        ax.grid(alpha=0.3)
+        ax = axes[i, 1]
+        shown = (x_ref[:, i] - x[:, i]) if x_ref is not None else (x[:, i] - x[0, i])
+        ax.plot(result.time, shown * factor, color=COLORS[i % len(COLORS)])
+        ax.set_ylabel(f"{'error' if x_ref is not None else 'change'} in {name} ({small_unit})")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(loc="upper right")
+    axes[0, 0].set_title(f"{title}: task coordinates")
+    axes[0, 1].set_title("x_ref - x" if x_ref is not None else "x - x(0): change from the start")
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[-1, 1].set_xlabel("time (s)")
+    return _save(fig, path)
+
 #: How :func:`mechanism` draws each kind of polyline a model's ``sketch(q)`` returns.
 SKETCH_STYLES = {"links": dict(lw=2.5, solid_capstyle="round"), "passive": dict(lw=1.0, ls="--"),
                  "end_effector": dict(lw=2.0, marker="o", ms=5, markevery=[0])}

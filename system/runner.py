@@ -79,8 +79,9 @@ class Run:
 
 def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]) -> list[Path]:
     """The figures of one run: block diagram, references, tracking, efforts (where the run has a
-    ``tau`` role), the mechanism at several instants (where the robot's model draws itself) and
-    the iterations of an iterative solver where the run recorded some."""
+    ``tau`` role), the task coordinates (where it has an ``x`` role), the mechanism at several
+    instants (where the robot's model draws itself) and the iterations of an iterative solver
+    where the run recorded some."""
     from . import plots
 
     made = [plots.block_diagram(system, out / "block_diagram.png", order)]
@@ -90,6 +91,8 @@ def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]
              plots.tracking(result, roles, out / "tracking.png", system.name)]
     if roles.tau:
         made.append(plots.efforts(result, roles, out / "efforts.png", system.name))
+    if roles.x:
+        made.append(plots.pose(result, roles, out / "pose.png", system.name))
     drawing = plots.mechanism(result, roles, out / "mechanism.png", system.name)
     if drawing is not None:                        # a model that draws itself (sketch)
         made.append(drawing)

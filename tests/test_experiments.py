@@ -248,7 +248,8 @@ def test_3rrp_disturbance_unactuated_starts_with_j_m_inv_jt_f_and_gains_the_work
 
 
 def test_3rrp_runs_write_the_mechanism_figure_and_an_unactuated_run_has_no_efforts(fmu_root, tmp_path):
-    """robofmu run on 3rrp: the mechanism drawn at several instants (the model sketches itself);
+    """robofmu run on 3rrp: the pose (role x) and the mechanism drawn at several instants (the
+    model sketches itself);
     an unactuated run (no tau role) has no efforts figure and no peak effort; inputs the
     experiment gives values (plant.tau, plant.f_ext, ik.x_ref) are not warned about."""
     from robofmu.system.runner import run_experiment
@@ -257,6 +258,7 @@ def test_3rrp_runs_write_the_mechanism_figure_and_an_unactuated_run_has_no_effor
                           stop_time=0.05, progress=False)
     names = {p.name for p in free.figures}
     assert "mechanism.png" in names and "efforts.png" not in names and "tracking.png" in names
+    assert "pose.png" in names                                       # the x role: the plant's pose
     assert free.metrics.peak_effort is None and "| — |" in free.section
     assert not Master(experiment.load("3rrp-disturbance-unactuated-fxy", fmu_dir=fmu_root)).check()
     held = run_experiment("3rrp-disturbance", tmp_path / "held", fmu_dir=fmu_root, stop_time=0.05, progress=False)

@@ -26,8 +26,8 @@ class Tracking:
         |FK(q) - x_ref| at every recorded point (task units), where the run has a task reference.
     events : dict
         name -> (time in s, task-point error or NaN), e.g. when the gripper closes.
-    peak_effort : ndarray, shape (n,)
-        max |tau| (N.m or N).
+    peak_effort : ndarray, shape (n,) or None
+        max |tau| (N.m or N); None without a ``tau`` role (an unactuated run).
     final_error : ndarray, shape (n,)
         q_ref - q at the last point.
     final_speed : ndarray, shape (n,) or None
@@ -40,21 +40,22 @@ class Tracking:
     effort_units: list
     tcp_error: np.ndarray | None
     events: dict
-    peak_effort: np.ndarray
+    peak_effort: np.ndarray | None
     final_error: np.ndarray
     final_speed: np.ndarray | None
 
 
 def tracking(result: Result, roles: Roles) -> Tracking:
-    """Metrics of a run recording the roles ``q``, ``q_ref`` and ``tau`` (``x_ref``, ``grip`` if any)."""
-    roles.require("q", "q_ref", "tau")
+    """Metrics of a run recording the roles ``q`` and ``q_ref`` (``tau``, ``x_ref``, ``grip`` if any)."""
+    roles.require("q", "q_ref")
     q, q_ref = roles.vector(result, "q"), roles.vector(result, "q_ref")
-    tau = roles.vector(result, "tau")
+    tau = roles.vector(result, "tau") if roles.tau else None
     e = q_ref - q
     model = roles.model()
     n = q.shape[1]
     joint_units = [result.units.get(f"{roles.q}[{j + 1}]") or u for j, u in enumerate(model.joint_units(0))]
-    effort_units = [result.units.get(f"{roles.tau}[{j + 1}]") or u for j, u in enumerate(model.effort_units())]
+    effort_units = [(result.units.get(f"{roles.tau}[{j + 1}]") if roles.tau else None) or u
+                    for j, u in enumerate(model.effort_units())]
     tcp = roles.tcp_error(result, model)
     ev = {}
     for name, t in roles.events(result).items():
@@ -62,7 +63,7 @@ def tracking(result: Result, roles: Roles) -> Tracking:
         ev[name] = (float(result.time[k]), float(tcp[k]) if tcp is not None else float("nan"))
     speed = np.abs(result.vector(roles.qd)[-1]) if roles.qd and f"{roles.qd}[1]" in result.columns else None
     return Tracking(np.max(np.abs(e), axis=0), np.sqrt(np.mean(e ** 2, axis=0)), joint_units[:n],
-                    effort_units[:n], tcp, ev, np.max(np.abs(tau), axis=0), e[-1], speed)
+                    effort_units[:n], tcp, ev, None if tau is None else np.max(np.abs(tau), axis=0), e[-1], speed)
 
 
 def markdown_table(rows: list[list], header: list[str]) -> str:
@@ -72,13 +73,13 @@ def markdown_table(rows: list[list], header: list[str]) -> str:
 
 
 def joint_table(m: Tracking) -> str:
-    """One row per joint: max and RMS error (mrad or mm), peak effort (N·m or N)."""
+    """One row per joint: max and RMS error (mrad or mm), peak effort (N·m or N; "—" without efforts)."""
     rows = []
     for j in range(len(m.max_error)):
         factor, unit = small(m.joint_units[j])
         rows.append([f"q{j + 1}", f"{m.max_error[j] * factor:.4f} {unit}", f"{m.rms_error[j] * factor:.4f} {unit}",
                      f"{m.final_error[j] * factor:.4f} {unit}",
-                     f"{m.peak_effort[j]:.4f} {printed(m.effort_units[j])}"])
+                     "—" if m.peak_effort is None else f"{m.peak_effort[j]:.4f} {printed(m.effort_units[j])}"])
     return markdown_table(rows, ["joint", "max error", "RMS error", "error at the end", "peak effort"])
 
 

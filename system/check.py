@@ -4,7 +4,8 @@
 refuses the diagram (:class:`DiagramError`, listing every problem at once, each naming blocks and
 variables) or returns a :class:`Plan`: the blocks with their model descriptions and
 direct-feedthrough maps, the wires expanded to scalar :class:`Link` s, the warnings (unconnected
-inputs) and an evaluation order in which every feedthrough input is produced before it is read.
+inputs the experiment gives no value) and an evaluation order in which every feedthrough input
+is produced before it is read.
 
 The master (:meth:`Master.check <robofmu.system.master.Master.check>`) runs from a plan, the SSP
 export writes one. The helpers here are the one place for facts read from a model description:
@@ -157,7 +158,8 @@ class Plan:
     links : list of Link
         Every wire expanded to scalar connections, in wire order.
     warnings : list of str
-        Unconnected inputs (they keep their start values).
+        Unconnected inputs the block's parameters give no value (they keep their start values;
+        an input set there, e.g. a constant load, is meant to be held and is not warned about).
     order : list of str
         Instance names in an evaluation order: every block after the blocks feeding its
         direct-feedthrough inputs.
@@ -201,9 +203,12 @@ def plan(system: System) -> Plan:
     problems += _algebraic_loops(nodes, links)
     if problems:
         raise DiagramError(system.name, problems)
+    given = {(spec.name, variable) for spec in system.blocks if spec.name in nodes
+             for base in spec.parameters for variable in expand(nodes[spec.name].variables, base)}
     warnings = [f"input {name}.{variable.name} is not connected: it keeps its start value {variable.start}"
                 for name, node in nodes.items() for variable in node.model_description.modelVariables
-                if variable.causality == "input" and (name, variable.name) not in driven]
+                if variable.causality == "input" and (name, variable.name) not in driven
+                and (name, variable.name) not in given]       # an input given a value is no surprise
     return Plan(system, nodes, links, warnings, _evaluation_order(system, nodes, links))
 
 

@@ -41,7 +41,7 @@ def experiment_section(section: dict, out: Path, fmu_dir) -> tuple[list[str], li
         factor, unit = small(m.joint_units[worst])
         summary.append([name, f"{m.max_error[worst] * factor:.4f} {unit} (q{worst + 1})",
                         "—" if m.tcp_error is None else f"{m.tcp_error.max() * 1e3:.4f}",
-                        ", ".join(f"{v:.3g}" for v in m.peak_effort)])
+                        "—" if m.peak_effort is None else ", ".join(f"{v:.3g}" for v in m.peak_effort)])
     stem = "-".join(section["experiments"][:1])
     if len(runs) > 1:
         roles = next(iter(runs.values())).roles

@@ -10,8 +10,8 @@ and the pawn's mass live in one place.
 
 ``[roles]`` names the signals analysis and plots need, by what they mean: ``q`` (measured joint
 positions), ``q_ref`` (joint reference), ``tau`` (joint efforts), and where the diagram has them
-``x_ref`` (task reference) and ``grip`` (gripper). Nothing else in ``system/`` knows instance
-names.
+``x_ref`` (task reference), ``x`` (measured task coordinates, e.g. a plant's pose output) and
+``grip`` (gripper). Nothing else in ``system/`` knows instance names.
 
 A file that cannot be used is refused with an :class:`ExperimentError` (a ValueError) in one
 line naming the file and the key: a TOML syntax error (with its line), a missing ``name``,
@@ -35,7 +35,8 @@ EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 #: Roles an experiment may name, and what each means.
 ROLES = {"q": "measured joint positions", "qd": "measured joint velocities",
          "q_ref": "joint position reference", "tau": "joint efforts",
-         "x_ref": "task-space reference", "grip": "gripper closed"}
+         "x_ref": "task-space reference", "x": "measured task coordinates (a plant's pose output)",
+         "grip": "gripper closed"}
 
 #: Top-level keys of an experiment file, and what each must hold.
 KEYS = {"name": "a string (the experiment's name)",
@@ -85,8 +86,9 @@ def _is_base(path: Path) -> bool:
 
 
 def available() -> list[str]:
-    """Names of the runnable experiments (bases that only hold a diagram are excluded)."""
-    return [p.stem for p in sorted(EXPERIMENTS_DIR.glob("*.toml")) if not _is_base(p)]
+    """Names of the runnable experiments, sorted by name (a name before its variants:
+    ``a``, ``a-b``); bases that only hold a diagram are excluded."""
+    return sorted(p.stem for p in EXPERIMENTS_DIR.glob("*.toml") if not _is_base(p))
 
 
 def _path(name_or_path: str | Path) -> Path:

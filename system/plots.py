@@ -123,6 +123,79 @@ def efforts(result: Result, roles: Roles, path: Path, title: str) -> Path:
     return _save(fig, path)
 
 
+def pose(result: Result, roles: Roles, path: Path, title: str) -> Path:
+    """The measured task coordinates (role ``x``) over time, one row per coordinate: beside the
+    task reference and with the error x_ref - x where the run has an ``x_ref`` role, else with the
+    departure x - x(0) from the start."""
+    roles.require("x")
+    x = roles.vector(result, "x")
+    x_ref = roles.vector(result, "x_ref") if roles.x_ref else None
+    coordinates = roles.model().task_coordinates
+    m = x.shape[1]
+    fig, axes = plt.subplots(m, 2, figsize=(11, 2.2 * m), sharex=True, squeeze=False)
+    for i in range(m):
+        unit = result.units.get(f"{roles.x}[{i + 1}]")
+        factor, small_unit = small(unit)
+        name = coordinates[i] if i < len(coordinates) else f"x{i + 1}"
+        ax = axes[i, 0]
+        if x_ref is not None:
+            ax.plot(result.time, x_ref[:, i], color="0.5", lw=3, label="reference")
+        ax.plot(result.time, x[:, i], color=COLORS[i % len(COLORS)], lw=1, label="measured")
+        ax.set_ylabel(f"{name} ({printed(unit)})")
+        ax.grid(alpha=0.3)
+        ax = axes[i, 1]
+        shown = (x_ref[:, i] - x[:, i]) if x_ref is not None else (x[:, i] - x[0, i])
+        ax.plot(result.time, shown * factor, color=COLORS[i % len(COLORS)])
+        ax.set_ylabel(f"{'error' if x_ref is not None else 'change'} in {name} ({small_unit})")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(loc="upper right")
+    axes[0, 0].set_title(f"{title}: task coordinates")
+    axes[0, 1].set_title("x_ref - x" if x_ref is not None else "x - x(0): change from the start")
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[-1, 1].set_xlabel("time (s)")
+    return _save(fig, path)
+
+#: How :func:`mechanism` draws each kind of polyline a model's ``sketch(q)`` returns.
+SKETCH_STYLES = {"links": dict(lw=2.5, solid_capstyle="round"), "passive": dict(lw=1.0, ls="--"),
+                 "end_effector": dict(lw=2.0, marker="o", ms=5, markevery=[0])}
+
+
+def mechanism(result: Result, roles: Roles, path: Path, title: str, instants: int = 6) -> Path | None:
+    """The mechanism drawn at ``instants`` recorded instants evenly spaced along the path of its
+    first two task coordinates (in time where it does not move) by a model's ``sketch(q)`` (plane
+    polylines by kind), with that path; None for a model that draws none."""
+    model = roles.model()
+    if not callable(getattr(model, "sketch", None)):
+        return None
+    q = roles.vector(result, "q")
+    path_xy = np.array([model.fk(v)[:2] for v in q])
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path_xy, axis=0), axis=1))])
+    if travelled[-1] > 0.0:        # evenly spaced along the path (distinct poses), its first and last points
+        picks = np.searchsorted(travelled, np.linspace(0.0, travelled[-1], instants), side="left")
+        picks[-1] = len(q) - 1
+    else:
+        picks = np.linspace(0, len(q) - 1, instants).round().astype(int)
+    picks = np.unique(np.minimum(picks, len(q) - 1))
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    ax.plot(path_xy[:, 0], path_xy[:, 1], color="0.6", lw=1, label="path of the task point")
+    cmap = plt.get_cmap("viridis")
+    for n, k in enumerate(picks):
+        color = cmap(n / max(1, len(picks) - 1))
+        drawn = model.sketch(q[k])
+        for kind, lines in drawn.items():
+            for m, line in enumerate(lines):
+                ax.plot(line[:, 0], line[:, 1], color=color, **SKETCH_STYLES.get(kind, {}),
+                        label=f"t = {result.time[k]:g} s" if kind == next(iter(drawn)) and m == 0 else None)
+    ax.plot([0.0], [0.0], "ko", ms=4)
+    ax.set_aspect("equal")
+    unit = printed(model.task_units(0)[0])
+    ax.set_xlabel(f"{model.task_coordinates[0]} ({unit})")
+    ax.set_ylabel(f"{model.task_coordinates[1]} ({unit})")
+    ax.set_title(f"{title}: the mechanism at {len(picks)} instants")
+    ax.legend(fontsize=8, loc="best")
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
 def error_comparison(results: dict[str, Result], roles: Roles, path: Path, title: str) -> Path:
     """Seed 002 Fig. 11: the tracking error of several runs of one diagram, per joint."""
     first = next(iter(results.values()))

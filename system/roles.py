@@ -25,7 +25,8 @@ class Roles:
     robot : str
     q, qd, q_ref, tau : str or None
         Vector bases, e.g. ``"plant.q"``.
-    x_ref, grip : str or None
+    x_ref, x, grip : str or None
+        ``x``: measured task coordinates (a plant's pose output).
     """
 
     robot: str
@@ -34,6 +35,7 @@ class Roles:
     q_ref: str | None = None
     tau: str | None = None
     x_ref: str | None = None
+    x: str | None = None
     grip: str | None = None
 
     @classmethod

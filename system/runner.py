@@ -40,8 +40,9 @@ from .roles import Roles
 __all__ = ["OutputFolder", "Run", "UsageError", "check_fmu_folder", "check_times", "check_writable",
            "figures_of", "progress_printer", "run_experiment"]
 
-#: The roles the analysis of a run reads.
-NEEDED_ROLES = ("q", "q_ref", "tau")
+#: The roles the analysis of a run reads (``tau`` too where the diagram has efforts: an
+#: unactuated run, whose plant's efforts are unwired at their start values, declares none).
+NEEDED_ROLES = ("q", "q_ref")
 
 
 class UsageError(ValueError):
@@ -77,16 +78,24 @@ class Run:
 
 
 def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]) -> list[Path]:
-    """The figures of one run: block diagram, references, tracking, efforts, and the iterations of
-    an iterative solver where the run recorded some."""
+    """The figures of one run: block diagram, references, tracking, efforts (where the run has a
+    ``tau`` role), the task coordinates (where it has an ``x`` role), the mechanism at several
+    instants (where the robot's model draws itself) and the iterations of an iterative solver
+    where the run recorded some."""
     from . import plots
 
     made = [plots.block_diagram(system, out / "block_diagram.png", order)]
     if roles.x_ref:
         made.append(plots.task_reference(result, roles, out / "task_reference.png"))
     made += [plots.joint_reference(result, roles, out / "joint_reference.png"),
-             plots.tracking(result, roles, out / "tracking.png", system.name),
-             plots.efforts(result, roles, out / "efforts.png", system.name)]
+             plots.tracking(result, roles, out / "tracking.png", system.name)]
+    if roles.tau:
+        made.append(plots.efforts(result, roles, out / "efforts.png", system.name))
+    if roles.x:
+        made.append(plots.pose(result, roles, out / "pose.png", system.name))
+    drawing = plots.mechanism(result, roles, out / "mechanism.png", system.name)
+    if drawing is not None:                        # a model that draws itself (sketch)
+        made.append(drawing)
     solver = plots.iterations({system.name: result}, out / "iterations.png", system.name)
     if solver is not None:                         # an iterative solver's recorded diagnostics
         made.append(solver)

@@ -95,7 +95,7 @@ def readonly_target(root: Path) -> Path:
 #: ``{readonly}`` are filled in; every command runs in the ``work`` folder.
 MISTAKES = {
     "unknown-experiment": (["run", "no-such-experiment"], ["unknown experiment 'no-such-experiment'",
-                                                           "available: chess-pd"]),
+                                                           "available: 3rrp-circle, 3rrp-disturbance, ", ", chess-pd, "]),
     "missing-file": (["run", "missing.toml"], ["missing.toml: no such experiment file"]),
     "syntax-error": (["run", "syntax.toml"], ["syntax.toml: invalid TOML", "line 2"]),
     "syntax-error-at-end": (["run", "unterminated.toml"], ["unterminated.toml: invalid TOML", "line 3"]),

@@ -102,3 +102,173 @@ def test_newton_raphson_runs_track_the_waypoints_within_0_1_mm(name, fmu_root):
     assert np.abs(result.vector("plant.qd")[-1]).max() < 1e-6
     assert np.abs(result.vector("trajectory.xd_ref")[-1]).max() == 0.0
     assert iterations[-1] == 0                            # at rest: the warm start is already the solution
+
+
+# -- seed 004: the planar 3-RRP parallel mechanism ---------------------------------------------------------
+HOME_POSE = np.array([0.0, 0.0, -np.pi / 3])          # robots.md section 5: q = (0, 120, 240 degrees)
+
+
+def loop_closure_residual(model, q, pose):
+    """Distances (m) of each leg's tip Q_i = r (cos q_i, sin q_i) from its line through Z = (x, y)
+    at angle theta + alpha_i, shape (k, 3): zero where q and the pose close the three loops."""
+    phi = pose[:, 2:3] + model.alpha
+    tip = model.r * np.stack([np.cos(q), np.sin(q)], axis=-1) - pose[:, None, :2]
+    return -tip[..., 0] * np.sin(phi) + tip[..., 1] * np.cos(phi)
+
+
+def circle_phase(t, T=4.0, c=1.5):
+    """robots.md's phase: phi 0 -> 2 pi in T by LSPB, cruise rate c times the mean rate."""
+    v = c * 2 * np.pi / T
+    tb = T - 2 * np.pi / v
+    a = v / tb
+    t = np.clip(t, 0.0, T)
+    return np.where(t < tb, 0.5 * a * t ** 2, np.where(t <= T - tb, 0.5 * a * tb ** 2 + v * (t - tb),
+                                                       2 * np.pi - 0.5 * a * (T - t) ** 2))
+
+
+def check_pose_outputs(model, result):
+    """plant.x is FK(plant.q), fk.x the same; the loop closures hold; jacobian.J is J(plant.q)."""
+    q, pose = result.vector("plant.q"), result.vector("plant.x")
+    np.testing.assert_allclose(pose, model.fk_many(q), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(result.vector("fk.x"), pose, rtol=0, atol=1e-15)
+    assert np.abs(loop_closure_residual(model, q, pose)).max() < 1e-12
+    J = result.vector("jacobian.J").reshape(-1, 3, 3)
+    for k in (0, len(q) // 2, len(q) - 1):
+        np.testing.assert_allclose(J[k], model.jacobian(q[k]), rtol=0, atol=1e-14)
+
+
+def test_3rrp_circle_tracks_the_pose_within_0_1_mm_and_0_1_mrad_and_ends_at_rest(fmu_root):
+    system, result = run("3rrp-circle", fmu_root)
+    assert system.step == 0.001 and system.stop_time == 5.0 and system.algorithm == "gauss-seidel"
+    assert [b.name for b in system.blocks] == ["trajectory", "ik", "controller", "plant", "fk", "jacobian"]
+    controller = system.block("controller")
+    assert (controller.parameters["kp"], controller.parameters["kd"]) == (400.0, 40.0)
+    model = load_model("3rrp")
+    t = result.time
+    assert len(t) == 5001 and t[-1] == pytest.approx(5.0)
+    # the reference is robots.md's circle from the home pose, once round in 4 s, then at rest
+    phi = circle_phase(t)
+    expected = np.stack([0.05 * (1 - np.cos(phi)), 0.05 * np.sin(phi),
+                         -np.pi / 3 + np.radians(15.0) * np.sin(phi)], axis=1)
+    x_ref = result.vector("trajectory.x_ref")
+    np.testing.assert_allclose(x_ref, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(x_ref[0], HOME_POSE, atol=1e-15)
+    np.testing.assert_allclose(model.fk(np.array(model.configuration("home"))), HOME_POSE, atol=1e-15)
+    k = int(np.argmin(np.abs(t - 2.0)))                  # halfway: the far side of the circle
+    np.testing.assert_allclose(x_ref[k], [0.1, 0.0, -np.pi / 3], atol=1e-12)
+    # the IK solved every point, on its own branch: FK(q_ref) is the reference
+    assert result["ik.reachable"].min() == 1.0
+    np.testing.assert_allclose(model.fk_many(result.vector("ik.q_ref")), x_ref, rtol=0, atol=1e-12)
+    # the pose (the plant's output) within 0.1 mm in (x, y) and 0.1 mrad in theta throughout
+    pose = result.vector("plant.x")
+    position_error = np.linalg.norm(pose[:, :2] - x_ref[:, :2], axis=1)
+    angle_error = np.abs(pose[:, 2] - x_ref[:, 2])
+    assert position_error.max() < 1e-4 and angle_error.max() < 1e-4
+    check_pose_outputs(model, result)
+    # at rest at home at the end
+    np.testing.assert_allclose(pose[-1], HOME_POSE, atol=1e-9)
+    assert np.abs(result.vector("plant.qd")[-1]).max() < 1e-6
+    assert np.abs(result.vector("trajectory.xd_ref")[-1]).max() == 0.0
+
+
+# Seed 004's four load cases (f_ext = (Fx N, Fy N, Mz N.m)), each under the PD holding home and unactuated.
+LOADS = {"fx": [-1e-3, 0.0, 0.0], "fy": [0.0, -1e-3, 0.0], "fxy": [-1e-3, -1e-3, 0.0], "mz": [0.0, 0.0, -1e-3]}
+HELD = {"fx": "3rrp-disturbance", "fy": "3rrp-disturbance-fy", "fxy": "3rrp-disturbance-fxy",
+        "mz": "3rrp-disturbance-mz"}
+
+
+def test_3rrp_disturbance_experiments_are_listed_and_built_on_two_bases():
+    runnable = experiment.available()
+    names = set(HELD.values()) | {f"3rrp-disturbance-unactuated-{case}" for case in LOADS}
+    assert names <= set(runnable) and "3rrp-circle" in runnable
+    assert "3rrp-held" not in runnable and "3rrp-unactuated" not in runnable      # the abstract bases
+    for case, load in LOADS.items():
+        held = experiment.load(HELD[case])
+        free = experiment.load(f"3rrp-disturbance-unactuated-{case}")
+        assert held.block("plant").parameters["f_ext"] == load == free.block("plant").parameters["f_ext"]
+        assert held.stop_time == free.stop_time == 5.0 and held.step == free.step == 0.001
+        assert "controller" not in [b.name for b in free.blocks]
+        assert free.block("plant").parameters["tau"] == [0.0, 0.0, 0.0]
+        assert not any(w.dst == "plant" for w in free.wires)          # nothing drives the plant's inputs
+
+
+@pytest.mark.parametrize("case", sorted(LOADS))
+def test_3rrp_disturbance_under_the_pd_deflects_as_the_jacobian_predicts(case, fmu_root):
+    """At rest under the load, M(q) kp (q_ref - q) + J^T f = 0 (computed torque, tau = M (kp e -
+    kd qd) + N): dq = M(home)^-1 J^T f / kp, the pose change J dq."""
+    system, result = run(HELD[case], fmu_root)
+    model = load_model("3rrp")
+    home = np.array(model.configuration("home"))
+    kp = system.block("controller").parameters["kp"]
+    assert (kp, system.block("controller").parameters["kd"]) == (400.0, 40.0)
+    f = np.array(LOADS[case])
+    q, pose = result.vector("plant.q"), result.vector("plant.x")
+    # the reference is constant: IK of the home pose
+    np.testing.assert_allclose(result.vector("ik.q_ref"), np.tile(home, (len(q), 1)), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(pose[0], HOME_POSE, atol=1e-15)
+    J = result.vector("jacobian.J")[0].reshape(3, 3)               # the jacobian block's J(home)
+    dq = np.linalg.solve(model.mass_matrix(home), J.T @ f) / kp
+    predicted = J @ dq
+    deflection = pose[-1] - pose[0]
+    assert np.linalg.norm(deflection - predicted) < 0.01 * np.linalg.norm(predicted)
+    assert np.linalg.norm(q[-1] - home - dq) < 0.01 * np.linalg.norm(dq)
+    # settled: at rest, and the last second moves the pose by less than 1e-6 of the deflection
+    assert np.abs(result.vector("plant.qd")[-1]).max() < 1e-9
+    k = int(np.argmin(np.abs(result.time - 4.0)))
+    assert np.abs(pose[-1] - pose[k]).max() < 1e-6 * np.abs(predicted).max()
+    check_pose_outputs(model, result)
+
+
+@pytest.mark.parametrize("case", sorted(LOADS))
+def test_3rrp_disturbance_unactuated_starts_with_j_m_inv_jt_f_and_gains_the_work_done(case, fmu_root):
+    """From rest with tau = 0 the pose accelerates at J M^-1 J^T f (M = I_O 1 + J^T M_E J; not
+    f / m nor Mz / I, the links' inertia is felt at the end effector); the kinetic energy is the
+    work the wrench does, f . (pose - pose_0) with theta unwrapped."""
+    system, result = run(f"3rrp-disturbance-unactuated-{case}", fmu_root)
+    model = load_model("3rrp")
+    home = np.array(model.configuration("home"))
+    f = np.array(LOADS[case])
+    h = system.step
+    q, qd, pose = result.vector("plant.q"), result.vector("plant.qd"), result.vector("plant.x")
+    np.testing.assert_allclose(pose[0], HOME_POSE, atol=1e-15)
+    J = model.jacobian(home)
+    predicted = J @ np.linalg.solve(model.mass_matrix(home), J.T @ f)
+    # from rest the jerk vanishes (qd = 0): x(h) - x(0) = a h^2 / 2 + O(h^4)
+    initial = 2.0 * (pose[1] - pose[0]) / h ** 2
+    assert np.linalg.norm(initial - predicted) < 0.01 * np.linalg.norm(predicted)
+    # the effective inertia is larger than the end effector's alone
+    ee = model.end_effector_inertia
+    assert np.all(np.abs(predicted) <= np.abs(f / ee) + 1e-15)
+    unwrapped = pose.copy()
+    unwrapped[:, 2] = np.unwrap(pose[:, 2])
+    work = (unwrapped - unwrapped[0]) @ f
+    kinetic = np.array([model.kinetic_energy(a, b) for a, b in zip(q, qd)])
+    assert kinetic[-1] > 0 and np.abs(kinetic - work).max() < 1e-9 * kinetic[-1]
+    check_pose_outputs(model, result)
+
+
+def test_3rrp_runs_write_the_mechanism_figure_and_an_unactuated_run_has_no_efforts(fmu_root, tmp_path):
+    """robofmu run on 3rrp: the pose (role x) and the mechanism drawn at several instants (the
+    model sketches itself);
+    an unactuated run (no tau role) has no efforts figure and no peak effort; inputs the
+    experiment gives values (plant.tau, plant.f_ext, ik.x_ref) are not warned about."""
+    from robofmu.system.runner import run_experiment
+
+    free = run_experiment("3rrp-disturbance-unactuated-fxy", tmp_path / "free", fmu_dir=fmu_root,
+                          stop_time=0.05, progress=False)
+    names = {p.name for p in free.figures}
+    assert "mechanism.png" in names and "efforts.png" not in names and "tracking.png" in names
+    assert "pose.png" in names                                       # the x role: the plant's pose
+    assert free.metrics.peak_effort is None and "| — |" in free.section
+    assert not Master(experiment.load("3rrp-disturbance-unactuated-fxy", fmu_dir=fmu_root)).check()
+    held = run_experiment("3rrp-disturbance", tmp_path / "held", fmu_dir=fmu_root, stop_time=0.05, progress=False)
+    assert {"mechanism.png", "efforts.png"} <= {p.name for p in held.figures}
+    assert held.metrics.peak_effort.shape == (3,)
+    model = load_model("3rrp")
+    drawn = model.sketch(np.array(model.configuration("home")))
+    assert [len(drawn[k]) for k in ("links", "passive", "end_effector")] == [3, 3, 1]
+    for link, slider in zip(drawn["links"], drawn["passive"]):
+        np.testing.assert_allclose(link[1], slider[0])                    # each link's tip starts its slider
+        np.testing.assert_allclose(slider[1], HOME_POSE[:2], atol=1e-15)  # and the slider ends at Z
+    serial = run_experiment("rrp-line", tmp_path / "serial", fmu_dir=fmu_root, stop_time=0.01, progress=False)
+    assert "mechanism.png" not in {p.name for p in serial.figures}       # a serial model draws none

@@ -590,6 +590,19 @@ class Planar3RRP(RobotModel):
         return 0.0
 
 
+    # -- drawing --------------------------------------------------------------------------------
+    def sketch(self, q: np.ndarray) -> dict[str, list[np.ndarray]]:
+        """The mechanism at ``q`` as plane polylines (m), for figures: ``links`` (O -> Q_i, the
+        actuated links), ``passive`` (Q_i -> Z, each leg's slider line between its tip and the end
+        effector) and ``end_effector`` (Z and a tick of length r / 4 along theta). Each polyline
+        has shape (k, 2)."""
+        x, y, theta = self.fk(q)
+        z = np.array([x, y])
+        tips = self.r * np.stack([np.cos(q), np.sin(q)], axis=1)
+        return {"links": [np.array([[0.0, 0.0], tip]) for tip in tips],
+                "passive": [np.array([tip, z]) for tip in tips],
+                "end_effector": [np.array([z, z + 0.25 * self.r * np.array([np.cos(theta), np.sin(theta)])])]}
+
 class _Legs:
     """The per-leg quantities at one or many configurations (see the module docstring)."""
 

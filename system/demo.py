@@ -55,6 +55,8 @@ def experiment_section(section: dict, out: Path, fmu_dir) -> tuple[list[str], li
             tcp_figure = plots.tcp_error(tcp, out / f"{stem}-task-error.png")
             lines += [f"![task-point error]({tcp_figure.name})", ""]
     lines += diagnostics_lines(section, runs, out / f"{stem}-iterations.png", fmu_dir)
+    if section.get("cross_check"):
+        lines += cross_check_lines(section, runs, out / f"{stem}-cross-check.png", fmu_dir)
     for name, run in runs.items():
         lines += [run.section.replace("### ", "### "), "",
                   *[f"![{p.stem}]({name}/{p.name})" for p in run.figures], ""]
@@ -123,6 +125,36 @@ def diagnostics_lines(section: dict, runs: dict, path: Path, fmu_dir) -> list[st
         "experiment", "instance", "iterations at t = 0", "max iterations per step after t = 0",
         "communication points by iterations", "max residual", "tolerance"]), "",
         f"![iterations]({figure.name})", ""]
+
+
+def cross_check_lines(section: dict, runs: dict, path: Path, fmu_dir) -> list[str]:
+    """The runs against their robot model's second, independent formulation of the dynamics
+    (:mod:`robofmu.system.crosscheck`), where the model has one: a figure and a table; nothing
+    if no run's model has one."""
+    from .crosscheck import cross_check
+
+    checks = {}
+    for name, run in runs.items():
+        found = cross_check(load(name, fmu_dir=fmu_dir), run.result, run.roles)
+        if found is not None:
+            _say(f"cross-check: {name} by the independent formulation ({found.method}, "
+                 f"{found.step:g} s) in {found.seconds:.1f} s")
+            checks[name] = found
+    if not checks:
+        return []
+    title = section.get("cross_check_title", "The runs against a second, independent formulation of the dynamics")
+    figure = plots.cross_check(checks, path, title)
+    rows = [[name, f"{c.method.upper() if c.method == 'rk4' else c.method}, {c.step:g} s",
+             f"{c.residual.max():.2e} {printed(c.residual_units[0])}",
+             f"{c.residual[-1]:.2e} {printed(c.residual_units[0])}",
+             f"{c.residual_rate.max():.2e} {printed(c.residual_units[1])}",
+             f"{c.joint_difference.max():.2e} {c.joint_unit}",
+             f"{c.joint_difference[-1]:.2e} {c.joint_unit}", f"{c.seconds:.2f}"]
+            for name, c in checks.items()]
+    return [f"### {title}", "", section.get("cross_check_text", ""), "", markdown_table(rows, [
+        "experiment", "integrator, step", r"max \|Φ\|", r"\|Φ\| at the end", r"max \|Φ̇\|",
+        r"max over joints \|q_indep − q_cosim\|", "at the end", "integration time (s)"]), "",
+        f"![cross-check]({figure.name})", ""]
 
 
 def tutorial_lines(section: dict, out: Path) -> list[str]:

@@ -373,3 +373,27 @@ def block_diagram(system: System, path: Path, order: list[str] | None = None) ->
     ax.axis("off")
     ax.set_title(f"{system.name}: {system.description}", fontsize=10)
     return _save(fig, path)
+
+
+def cross_check(checks: dict, path: Path, title: str) -> Path:
+    """A second, independent formulation of the dynamics along each run (``checks``: run ->
+    :class:`~robofmu.system.crosscheck.CrossCheck`): its constraint residual |Phi(t)| (top) and
+    the largest difference of its joint coordinates from the co-simulated plant's (bottom), both
+    on log scales; points where a value is exactly 0 are left out."""
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 6.4), sharex=True)
+    styles = ["-", "--", "-.", ":"]
+    for k, (name, c) in enumerate(checks.items()):
+        color, style = COLORS[k % len(COLORS)], styles[k // len(COLORS) % len(styles)]
+        top.semilogy(c.time, np.where(c.residual > 0, c.residual, np.nan), style, color=color, lw=1,
+                     label=f"{name}: max {c.residual.max():.2g}")
+        bottom.semilogy(c.time, np.where(c.joint_difference > 0, c.joint_difference, np.nan), style,
+                        color=color, lw=1, label=f"{name}: max {c.joint_difference.max():.2g}")
+    first = next(iter(checks.values()))
+    top.set_ylabel(f"constraint residual |Φ| ({printed(first.residual_units[0])})")
+    bottom.set_ylabel(f"max over joints |q_indep − q_cosim| ({first.joint_unit})")
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, ncol=2, loc="lower right")
+    top.set_title(title, fontsize=10)
+    bottom.set_xlabel("time (s)")
+    return _save(fig, path)

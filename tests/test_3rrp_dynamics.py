@@ -401,3 +401,22 @@ def test_seed_autolev_start_against_the_model(model, lag):
     assert np.linalg.norm(lag.constraints(np.concatenate([HOME_Q, pose]))) < 1e-15
     seed = lag.constraints(np.concatenate([HOME_Q, [0.0, 0.0, 0.0]]))
     assert np.min(np.abs(seed)) > 0.17                                    # r sin 60 deg = 0.173 m each
+
+
+def test_model_offers_this_formulation_as_its_independent_dynamics(model, lag):
+    """Planar3RRP.independent_dynamics(): this formulation from the same description (and the
+    model's payload, a point mass at Z), with Baumgarte gains as options."""
+    other = model.independent_dynamics()
+    assert isinstance(other, LagrangeRRP3) and other is not lag
+    for name in ("r", "link_mass", "link_com", "link_inertia", "ee_mass", "ee_inertia", "alpha", "beta"):
+        assert getattr(other, name) == getattr(lag, name)
+    np.testing.assert_array_equal(other.line_offsets, lag.line_offsets)
+    assert model.independent_dynamics(alpha=0.0, beta=0.0).beta == 0.0
+    # simulate_joints closes the loops at q0 from a start guess and residuals() is residual() along it
+    q0 = np.array(model.configuration("home"))
+    traj = other.simulate_joints(q0, np.zeros(3), 0.01, h=1e-3, f_ext=[0.0, 0.0, -1e-3],
+                                 pose_guess=model.fk(q0) + 1e-3)
+    np.testing.assert_allclose(traj.p[0, 3:], model.fk(q0), atol=1e-14)
+    phi, phid = other.residuals(traj)
+    expected = np.array([other.residual(p, pd) for p, pd in zip(traj.p, traj.pd)])
+    np.testing.assert_allclose(np.column_stack([phi, phid]), expected, rtol=1e-12, atol=1e-18)

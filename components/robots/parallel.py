@@ -212,6 +212,17 @@ class Planar3RRP(RobotModel):
             raise ValueError(f"payload mass must be finite and >= 0 kg, got {mass}")
         self.payload = mass
 
+    def independent_dynamics(self, **baumgarte):
+        """A second, independent formulation of this mechanism's dynamics, for cross-checks:
+        Lagrange's equations on the spanning tree in maximal coordinates (q, x, y, theta) with
+        loop-closure multipliers and Baumgarte stabilization
+        (:class:`~robofmu.components.robots.parallel_lagrange.LagrangeRRP3`), built from the same
+        description's ``[mechanism]`` numbers and the current payload; it shares no code with this
+        model. ``baumgarte`` may give ``alpha`` and ``beta`` (1/s)."""
+        from .parallel_lagrange import LagrangeRRP3
+
+        return LagrangeRRP3.from_mechanism(self.mechanism, payload=self.payload, **baumgarte)
+
     @property
     def end_effector_inertia(self) -> np.ndarray:
         """diag(M_E) = (m_E, m_E, I_E) with the payload, shape (3,)."""

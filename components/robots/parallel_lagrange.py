@@ -155,6 +155,9 @@ class LagrangeRRP3:
             raise ValueError("each link needs a positive inertia about O")
         self._mass_diag = np.array([self.link_inertia_O] * 3 + [self.ee_mass, self.ee_mass, self.ee_inertia])
 
+    #: Units of the constraint residual |Phi| and of its rate |Phid| (:meth:`residuals`).
+    residual_units = ("m", "m/s")
+
     @classmethod
     def from_description(cls, robot: str = "3rrp", **baumgarte) -> "LagrangeRRP3":
         """The robot's numbers from its description's ``[mechanism]`` table (via the loader).
@@ -167,9 +170,15 @@ class LagrangeRRP3:
         mech = description.mechanism
         if mech is None:
             raise ValueError(f"robot {robot!r}: its description has no [mechanism] table")
+        return cls.from_mechanism(mech, **baumgarte)
+
+    @classmethod
+    def from_mechanism(cls, mech, payload: float = 0.0, **baumgarte) -> "LagrangeRRP3":
+        """From a description's ``[mechanism]`` table (r, link_*, ee_*, line_offsets); a point
+        ``payload`` (kg) at Z adds to the end effector's mass (not to its inertia)."""
         return cls(r=mech.r, link_mass=mech.link_mass, link_com=mech.link_com,
-                   link_inertia=mech.link_inertia, ee_mass=mech.ee_mass, ee_inertia=mech.ee_inertia,
-                   line_offsets=mech.line_offsets, **baumgarte)
+                   link_inertia=mech.link_inertia, ee_mass=mech.ee_mass + float(payload),
+                   ee_inertia=mech.ee_inertia, line_offsets=mech.line_offsets, **baumgarte)
 
     # -- geometry -------------------------------------------------------------------------------
     def line_angles(self, theta: float) -> np.ndarray:
@@ -228,6 +237,18 @@ class LagrangeRRP3:
     def residual(self, p: np.ndarray, pd: np.ndarray) -> tuple[float, float]:
         """(|Phi| in m, |Phid| in m/s), Euclidean norms over the three loops."""
         return float(np.linalg.norm(self.constraints(p))), float(np.linalg.norm(self.constraint_rates(p, pd)))
+
+    def residuals(self, trajectory: "Trajectory") -> tuple[np.ndarray, np.ndarray]:
+        """(|Phi(t)| in m, |Phid(t)| in m/s), shape (k,) each: :meth:`residual` along a trajectory."""
+        P, Pd = trajectory.p, trajectory.pd
+        q, x, y, th = P[:, :3], P[:, 3:4], P[:, 4:5], P[:, 5:6]
+        phi = th + self.line_offsets
+        sphi, cphi = np.sin(phi), np.cos(phi)
+        Phi = self.r * np.sin(phi - q) - x * sphi + y * cphi
+        c = self.r * np.cos(phi - q)
+        Phid = (-c * Pd[:, :3] - sphi * Pd[:, 3:4] + cphi * Pd[:, 4:5]
+                + (c - x * cphi - y * sphi) * Pd[:, 5:6])
+        return np.linalg.norm(Phi, axis=1), np.linalg.norm(Phid, axis=1)
 
     # -- consistent states (for starting a simulation; independent of the robot model) ----------
     def pose_from_joints(self, q: np.ndarray, guess: np.ndarray, tol: float = 1e-15,
@@ -388,6 +409,20 @@ class LagrangeRRP3:
                 raise RuntimeError(f"solve_ivp ({method}) failed: {sol.message}")
             X = sol.y.T
         return Trajectory(t, X[:, :6].copy(), X[:, 6:].copy())
+
+
+    def simulate_joints(self, q0: np.ndarray, qd0: np.ndarray, t_end: float, h: float = 1e-3,
+                        tau: Input = None, f_ext: Input = None, method: str = "rk4",
+                        pose_guess: np.ndarray | None = None, **tolerances) -> Trajectory:
+        """:meth:`simulate` from a state in actuated coordinates: the start pose closes the loops
+        at q0 (:meth:`pose_from_joints`, Newton from ``pose_guess``, e.g. another model's FK of
+        q0: only a start for the iteration), the start rates keep them closed
+        (:meth:`consistent_rates`)."""
+        q0 = np.asarray(q0, dtype=float)
+        guess = np.zeros(3) if pose_guess is None else np.asarray(pose_guess, dtype=float)
+        p0 = np.concatenate([q0, self.pose_from_joints(q0, guess)])
+        pd0 = self.consistent_rates(p0, np.asarray(qd0, dtype=float))
+        return self.simulate(p0, pd0, t_end, h=h, tau=tau, f_ext=f_ext, method=method, **tolerances)
 
 
 def _value(u: Input, t: float, size: int) -> np.ndarray:

@@ -5,6 +5,7 @@ import re
 import numpy as np
 import pytest
 
+import ik_checks
 from robofmu.components.ik import Unreachable, make_solver, solver_class
 from robofmu.components.trajectory import WaypointTrajectory
 
@@ -97,22 +98,7 @@ def test_rates_match_finite_differences_of_position(ik):
 
 def test_rates_on_the_task_away_from_blend_switches(ik, gambit):
     """On the LSPB task the acceleration jumps at blend boundaries; elsewhere FD must agree."""
-    h = 1e-5
-    switches = []
-    for s in gambit.segments:
-        T = s.end - s.start
-        switches += [s.start, s.start + T / 3, s.end - T / 3, s.end]
-    checked = 0
-    for t in np.arange(0.01, 13.0, 0.037):
-        if min(abs(t - np.array(switches))) < 1e-3:
-            continue
-        x, xd, xdd = gambit.evaluate(t)
-        q, qd, qdd = ik.solve(x, xd, xdd)
-        qp, qm = ik.position(gambit.evaluate(t + h)[0]), ik.position(gambit.evaluate(t - h)[0])
-        np.testing.assert_allclose(qd, (qp - qm) / (2 * h), atol=1e-8)
-        np.testing.assert_allclose(qdd, (qp - 2 * q + qm) / h**2, atol=5e-4)
-        checked += 1
-    assert checked > 300
+    assert len(ik_checks.rates_against_differences(ik, gambit, np.arange(0.01, 13.0, 0.037))) > 300
 
 
 @pytest.mark.parametrize("x, message", [

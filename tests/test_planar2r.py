@@ -17,6 +17,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
+import ik_checks
 import lagrange_checks
 from robofmu.components.ik import Unreachable, solver_class
 from robofmu.components.robots import ROBOTS_DIR, load_description, load_model
@@ -251,22 +252,10 @@ def test_rates_match_finite_differences_along_the_reference_motion(model):
     """qd, qdd from J and J-dot q-dot (the IKSolver base) against differences of the positions,
     away from the LSPB blend switches (where the acceleration jumps)."""
     profile = WaypointTrajectory(**load_description("planar2r").trajectory.parameters)
-    ik = solver(model)
-    switches = np.concatenate([[s.start, s.start + (s.end - s.start) / 3, s.end - (s.end - s.start) / 3, s.end]
-                               for s in profile.segments])
-    h, checked = 1e-5, 0
-    for t in np.arange(0.01, profile.duration, 0.013):
-        if np.min(np.abs(t - switches)) < 1e-3:
-            continue
-        x, xd, xdd = profile.evaluate(t)
-        q, qd, qdd = ik.solve(x, xd, xdd)
-        qp, qm = ik.position(profile.evaluate(t + h)[0]), ik.position(profile.evaluate(t - h)[0])
-        np.testing.assert_allclose(qd, (qp - qm) / (2 * h), atol=1e-8)
-        np.testing.assert_allclose(qdd, (qp - 2 * q + qm) / h**2, atol=5e-4)
-        # and well within the URDF's velocity limits (the IK block's default qd_limit)
-        assert np.all(np.abs(qd) < 0.1 * model.velocity_limits())
-        checked += 1
-    assert checked > 200
+    rates = ik_checks.rates_against_differences(solver(model), profile, np.arange(0.01, profile.duration, 0.013))
+    assert len(rates) > 200
+    # and well within the URDF's velocity limits (the IK block's default qd_limit)
+    assert np.all(np.abs(rates) < 0.1 * model.velocity_limits())
 
 
 def test_other_link_lengths_are_read_from_the_urdf(tmp_path):

@@ -19,6 +19,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
+import ik_checks
 import lagrange_checks
 from robofmu.components.ik import Unreachable, solver_class
 from robofmu.components.robots import ROBOTS_DIR, load_description, load_model
@@ -272,21 +273,9 @@ def test_unknown_branch_option(model):
 
 def test_rates_match_finite_differences_along_the_reference_motion(model):
     profile = WaypointTrajectory(**load_description("rrp_offset").trajectory.parameters)
-    ik = solver(model)
-    switches = np.concatenate([[s.start, s.start + (s.end - s.start) / 3, s.end - (s.end - s.start) / 3, s.end]
-                               for s in profile.segments])
-    h, checked = 1e-5, 0
-    for t in np.arange(0.01, profile.duration, 0.013):
-        if np.min(np.abs(t - switches)) < 1e-3:
-            continue
-        x, xd, xdd = profile.evaluate(t)
-        q, qd, qdd = ik.solve(x, xd, xdd)
-        qp, qm = ik.position(profile.evaluate(t + h)[0]), ik.position(profile.evaluate(t - h)[0])
-        np.testing.assert_allclose(qd, (qp - qm) / (2 * h), atol=1e-8)
-        np.testing.assert_allclose(qdd, (qp - 2 * q + qm) / h**2, atol=5e-4)
-        assert np.all(np.abs(qd) < 0.1 * model.velocity_limits())     # the IK block's default qd_limit
-        checked += 1
-    assert checked > 250
+    rates = ik_checks.rates_against_differences(solver(model), profile, np.arange(0.01, profile.duration, 0.013))
+    assert len(rates) > 250
+    assert np.all(np.abs(rates) < 0.1 * model.velocity_limits())     # the IK block's default qd_limit
 
 
 def test_other_lengths_are_read_from_the_urdf(tmp_path):

@@ -33,6 +33,7 @@ bench: $(FMU_STAMP)
 	$(PY) benchmarks/run.py
 	$(PY) benchmarks/loop.py
 	$(PY) benchmarks/ik.py
+	$(PY) benchmarks/sweep.py
 
 # not part of `make test`: 10^6 steps of chess-pd through the master in one process (a few
 # minutes); fails if resident memory grows by 5 MB or more after the first tenth

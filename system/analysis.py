@@ -98,3 +98,45 @@ def tracking_report(name: str, description: str, m: Tracking, result: Result) ->
         text += ["", "At the end (t = {:g} s): joint speeds {}.".format(
             result.time[-1], ", ".join(f"{v:.2e}" for v in m.final_speed))]
     return "\n".join(text)
+
+
+def settling_time(time: np.ndarray, q_ref: np.ndarray, q: np.ndarray, band: float = 0.02) -> float:
+    """Time from the instant the reference comes to rest until every joint has settled (s).
+
+    The reference comes to rest at its last change (a change larger than 1e-9 of a joint's
+    travel). A joint has settled from the first point after which its error |q_ref - q| stays
+    within ``band`` times its travel (max - min of its reference over the run); joints that do
+    not move are not counted.
+
+    Parameters
+    ----------
+    time : ndarray, shape (k,)
+        Recorded points (s).
+    q_ref, q : ndarray, shape (k, n)
+        Joint reference and measured joint positions (joint units).
+    band : float
+        The settling band as a fraction of each joint's travel (0.02: 2 %).
+
+    Returns
+    -------
+    float
+        The settling time (0 if every error is inside the band from the rest instant on); NaN
+        where it does not apply or is not reached: the reference still moves at the end, no
+        joint moves, or an error is outside the band at the last point.
+    """
+    travel = np.ptp(q_ref, axis=0)
+    moving = travel > 0.0
+    if not np.any(moving):
+        return float("nan")
+    changed = np.any(np.abs(q_ref[:, moving] - q_ref[-1, moving]) > 1e-9 * travel[moving], axis=1)
+    rest = int(np.flatnonzero(changed)[-1]) + 1 if np.any(changed) else 0
+    if rest >= len(time) - 1:
+        return float("nan")
+    error = np.abs(q_ref[rest:, moving] - q[rest:, moving])
+    outside = np.any(error > band * travel[moving], axis=1)
+    if not np.any(outside):
+        return 0.0
+    last = int(np.flatnonzero(outside)[-1])
+    if last == len(error) - 1:
+        return float("nan")
+    return float(time[rest + last + 1] - time[rest])

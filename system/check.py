@@ -15,6 +15,7 @@ parameters and inputs (:func:`start_values`).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -212,11 +213,26 @@ def plan(system: System) -> Plan:
     return Plan(system, nodes, links, warnings, _evaluation_order(system, nodes, links))
 
 
-def _load(system: System) -> tuple[dict[str, Node], list[str]]:
-    """The nodes whose FMU is a valid co-simulation FMU, and the problems of the others."""
+#: (file identity) -> (validation problems, model description): an FMU file is validated and
+#: read once per process while it stays the same file (a sweep plans the same diagram per run).
+_DESCRIBED: dict[tuple, tuple[list, object]] = {}
+
+
+def _described(path: Path) -> tuple[list, object]:
+    """fmpy's validation problems and model description of the FMU file ``path`` (cached)."""
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
+    info = os.stat(path)
+    identity = (os.path.realpath(path), info.st_ino, info.st_size, info.st_mtime_ns)
+    if identity not in _DESCRIBED:
+        found = validate_fmu(str(path))
+        _DESCRIBED[identity] = (found, read_model_description(str(path), validate=False))
+    return _DESCRIBED[identity]
+
+
+def _load(system: System) -> tuple[dict[str, Node], list[str]]:
+    """The nodes whose FMU is a valid co-simulation FMU, and the problems of the others."""
     nodes: dict[str, Node] = {}
     problems: list[str] = []
     for spec in system.blocks:
@@ -225,8 +241,7 @@ def _load(system: System) -> tuple[dict[str, Node], list[str]]:
             problems.append(f"block {spec.name!r}: FMU {path} does not exist (run `robofmu build`)")
             continue
         try:
-            found = validate_fmu(str(path))
-            model_description = read_model_description(str(path), validate=False)
+            found, model_description = _described(path)
         except Exception as exc:
             problems.append(f"block {spec.name!r}: {path} is not a valid FMU: {exc}")
             continue

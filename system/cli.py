@@ -77,11 +77,13 @@ def _default_out(experiment: str) -> Path:
 def _run(args) -> int:
     from robofmu.system.master import Interrupted, SimulationError
     from robofmu.system.runner import run_experiment
+    from robofmu.system.sweep.design import parse_setting
 
     out = Path(args.out) if args.out else _default_out(args.experiment)
     try:
+        parameters = dict(parse_setting(text) for text in args.set or [])
         run = run_experiment(args.experiment, out, fmu_dir=args.fmus, step=args.step,
-                             stop_time=args.stop, algorithm=args.algorithm)
+                             stop_time=args.stop, algorithm=args.algorithm, parameters=parameters)
     except Interrupted as exc:
         _say("run", exc)
         return 130
@@ -94,6 +96,32 @@ def _run(args) -> int:
     print(run.section)
     print(f"\nwrote {out / 'results.csv'}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
     return 0
+
+
+def _sweep(args) -> int:
+    from robofmu.system.sweep.design import Design, parse_axis
+    from robofmu.system.sweep.run import SweepInterrupted, run_sweep
+
+    out = Path(args.out) if args.out else Path(str(_default_out(args.experiment)) + "-sweep")
+    try:
+        design = Design(args.experiment, [parse_axis(text) for text in args.vary], args.samples, args.seed,
+                        args.stop, args.step)
+        run = run_sweep(design, out, fmu_dir=args.fmus, workers=args.workers, scheduler=args.scheduler,
+                        keep_results=args.keep_results, retry_failed=args.retry_failed, metric=args.metric,
+                        threshold=args.threshold)
+    except SweepInterrupted as exc:
+        _say("sweep", exc)
+        return 130
+    except ConnectionError as exc:
+        _say("sweep", exc)
+        return 2
+    except ValueError as exc:          # UsageError, DesignError, ExperimentError, DiagramError
+        _say("sweep", exc)
+        return 2
+    failed = len(run.failed)
+    print(f"{len(run.rows)} runs ({run.ran} now, {run.reused} reused), {failed} failed; wrote "
+          f"{out / 'sweep.csv'}, {out / 'sweep.parquet'}, {out / 'report.md'} and {len(run.figures)} figures")
+    return 0                          # failed runs are rows of the map, not a failure of the sweep
 
 
 def _ssp(args) -> int:
@@ -213,7 +241,40 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
                                                            "(default: the experiment's)")
     p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"], help="master algorithm")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
+    p.add_argument("--set", action="append", metavar="BLOCK.PARAM=VALUE",
+                   help="set a block parameter over the experiment's (repeatable), e.g. controller.kp=400")
     p.set_defaults(func=_run)
+
+    p = sub.add_parser("sweep", help="many runs of one experiment over parameter grids or random samples, on Dask",
+                       description="Run an experiment many times with block parameters varied over a grid or "
+                                   "drawn at random, in parallel on Dask: a local cluster of worker processes by "
+                                   "default, or an existing cluster (--scheduler). Writes DIR/sweep.csv (one row "
+                                   "per run as it finishes: a column per varied BLOCK.PARAM, the metrics, "
+                                   "status and message), sweep.parquet, figures and report.md. A rerun of the same "
+                                   "sweep into the same DIR skips the runs already done; Ctrl-C keeps every "
+                                   "finished row (exit status 130). VALUES: a comma list 200,400,800, a range "
+                                   "START:STOP:COUNT (both ends included), or a distribution uniform(LOW,HIGH) / "
+                                   "normal(MEAN,STD) drawn --samples times with --seed. 'step=VALUES' varies the "
+                                   "communication step.")
+    p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
+    p.add_argument("--vary", action="append", metavar="BLOCK.PARAM=VALUES", required=True,
+                   help="a varied block parameter (repeatable; the grid is their product)")
+    p.add_argument("--samples", type=int, metavar="N", help="random samples (with a distribution)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the random samples (default: 0)")
+    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: the core count)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask cluster, e.g. tcp://host:8786")
+    p.add_argument("--out", metavar="DIR", help="sweep folder, continued if it holds this sweep "
+                                                "(default: results/EXPERIMENT-sweep)")
+    p.add_argument("--step", type=float, metavar="H", help="communication step in s (default: the experiment's)")
+    p.add_argument("--stop", type=float, metavar="T", help="stop time in s (default: the experiment's)")
+    p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
+    p.add_argument("--keep-results", action="store_true", help="keep each run's results.csv under DIR/runs/")
+    p.add_argument("--retry-failed", action="store_true", help="run the failed rows of an earlier sweep again")
+    p.add_argument("--metric", metavar="NAME", help="the metric the figures map (default: max_tcp_error where "
+                                                   "there is one, else max_joint_error)")
+    p.add_argument("--threshold", type=float, metavar="VALUE", help="the metric's level drawn as a contour "
+                                                                    "(default: 0.001 m for max_tcp_error)")
+    p.set_defaults(func=_sweep)
 
     p = sub.add_parser("ssp", help="export an experiment as an SSP 1.0 package (.ssp)",
                        description="Write the experiment's diagram, FMUs and parameter sets as an SSP "

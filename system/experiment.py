@@ -328,3 +328,27 @@ def load(name_or_path: str | Path, fmu_dir: str | Path | None = None) -> System:
         raise ExperimentError(path, None, str(exc)) from None
     system.source = path
     return system
+
+
+def with_parameters(system: System, values: dict) -> System:
+    """A copy of ``system`` with block parameters set, ``{"controller.kp": 400.0, ...}``.
+
+    Raises
+    ------
+    ValueError
+        Naming the entry, for a name that is not ``BLOCK.PARAM`` or names no block of the
+        experiment. (An unknown parameter, or a value of the wrong type, is refused when the
+        diagram is planned: :meth:`robofmu.system.master.Master.check`.)
+    """
+    import copy
+
+    configured = copy.deepcopy(system)
+    names = [b.name for b in configured.blocks]
+    for name, value in values.items():
+        block, dot, parameter = name.partition(".")
+        if not dot or not parameter:
+            raise ValueError(f"{name}: expected BLOCK.PARAM (e.g. controller.kp)")
+        if block not in names:
+            raise ValueError(f"{name}: no block {block!r} in {system.name} (blocks: {', '.join(names)})")
+        configured.block(block).parameters[parameter] = value
+    return configured

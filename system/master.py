@@ -537,7 +537,11 @@ class _Fmi2Functions:
     Taken from the FMU's shared library as fmpy loaded it: the ``dll`` (a ``ctypes.CDLL``) and
     ``component`` attributes of fmpy's ``FMU2Slave`` (public attributes, not fmpy's private
     table of wrapped functions). ``dll[name]`` makes a new ctypes function object, so the
-    prototypes set here (from the FMI 2.0 header) leave fmpy's own untouched.
+    prototypes set here (from the FMI 2.0 header) leave fmpy's own untouched. They are bound
+    as Python-API functions (``ctypes.PyDLL`` on the same handle): the calling thread keeps the
+    GIL through each call. A pythonfmu FMU takes the GIL again inside every call anyway; released
+    and retaken thousands of times a second, it would go to any other thread of the process that
+    waits for it (a Dask worker's event loop), and each step would queue behind that thread.
 
     Raises
     ------
@@ -556,6 +560,7 @@ class _Fmi2Functions:
                 "fmi2SetReal, fmi2GetBoolean, fmi2SetBoolean and fmi2DoStep from them (written "
                 "for fmpy 0.3.x)")
         self.component = component
+        library = ctypes.PyDLL(library._name, handle=library._handle)
         self.get_real = _bind(library, "fmi2GetReal")
         self.set_real = _bind(library, "fmi2SetReal")
         self.get_boolean = _bind(library, "fmi2GetBoolean")

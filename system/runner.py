@@ -37,8 +37,8 @@ from .diagram import System, expand
 from .master import DiagramError, Interrupted, Master, Result, SimulationError, step_count
 from .roles import Roles
 
-__all__ = ["OutputFolder", "Run", "UsageError", "check_fmu_folder", "check_times", "check_writable",
-           "figures_of", "progress_printer", "run_experiment"]
+__all__ = ["OutputFolder", "Run", "UsageError", "check_fmu_folder", "check_roles", "check_times", "check_writable",
+           "figures_of", "progress_printer", "run_experiment", "timing"]
 
 #: The roles the analysis of a run reads (``tau`` too where the diagram has efforts: an
 #: unactuated run, whose plant's efforts are unwired at their start values, declares none).
@@ -279,7 +279,7 @@ def check_fmu_folder(system: System, option: str = "--fmus") -> None:
                          f"one runs; rebuild: {build}")
 
 
-def _check_roles(system: System, master: Master) -> Roles:
+def check_roles(system: System, master: Master) -> Roles:
     """The roles, checked against the planned outputs (UsageError naming the file and key)."""
     source = system.source or system.name
     if not system.extra.get("robot"):
@@ -307,7 +307,7 @@ def _check_roles(system: System, master: Master) -> Roles:
     return roles
 
 
-def _timing(system: System, step: float | None, stop_time: float | None) -> tuple[float, float, int]:
+def timing(system: System, step: float | None, stop_time: float | None) -> tuple[float, float, int]:
     """The step, stop time and number of steps of the run, checked (UsageError naming --step /
     --stop or the file)."""
     check_times(step, stop_time)
@@ -347,7 +347,7 @@ def _short_report(name: str, text: str) -> str:
 
 def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus", step: float | None = None,
                    stop_time: float | None = None, algorithm: str | None = None, progress: bool = True,
-                   figures: bool = True) -> Run:
+                   figures: bool = True, parameters: dict | None = None) -> Run:
     """Run experiment ``name`` and write ``out_dir/results.csv``, its figures and ``report.md``.
 
     Everything is checked before the first FMU is instantiated (see the module notes); the
@@ -368,6 +368,9 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
         Print progress lines to stderr.
     figures : bool
         Write the figures.
+    parameters : dict, optional
+        Block parameters to set over the experiment's, ``{"controller.kp": 400.0}``
+        (``robofmu run --set``).
 
     Returns
     -------
@@ -388,14 +391,19 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     check_times(step, stop_time)
     folder = OutputFolder(out_dir)
     system = experiment.load(name, fmu_dir=fmu_dir)
-    h, stop, n = _timing(system, step, stop_time)
+    if parameters:
+        try:
+            system = experiment.with_parameters(system, parameters)
+        except ValueError as exc:
+            raise UsageError(f"--set {exc}") from None
+    h, stop, n = timing(system, step, stop_time)
     check_fmu_folder(system)
     master = Master(system, progress=progress_printer(system.name) if progress else None)
     try:
         warnings = master.check()
     except DiagramError as exc:
         raise DiagramError(str(system.source or system.name), exc.problems) from None
-    roles = _check_roles(system, master)
+    roles = check_roles(system, master)
     _check_memory(system, master, n, step, stop_time)
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)

@@ -1,5 +1,6 @@
 """Controller block: computed torque, tau = M(q)(qdd_ref + kd e' + kp e + ki z) + N(q, qd).
 
+``gain_scale`` multiplies the three gains (a loop-gain knob for sweeps; 1 leaves them as given).
 Direct feedthrough: tau is computed from the inputs at the current communication point; the
 integral z = integral of e dt advances with the error held over the step (z += e h). The
 position inputs q_ref and q start at the robot's home configuration (the rest at 0), so a lone
@@ -27,6 +28,7 @@ class ControllerBlock(Block):
         self.real("kp", "parameter", "1/s2", "Proportional gain (every joint)", gains.kp, low=0.0)
         self.real("kd", "parameter", "1/s", "Derivative gain (every joint)", gains.kd, low=0.0)
         self.real("ki", "parameter", "1/s3", "Integral gain (every joint); 0 for PD", gains.ki, low=0.0)
+        self.real("gain_scale", "parameter", "1", "Multiplies kp, kd and ki (1: the gains as given)", 1.0, low=0.0)
         self.real("g", "parameter", "m/s2", "Gravity in the controller's model", d.gravity, low=0.0)
         self.has_payload = d.payload is not None
         if self.has_payload:
@@ -51,7 +53,9 @@ class ControllerBlock(Block):
     def configure(self):
         self.robot.set_gravity(self.parameter("g"))
         self.payload_mass = self.parameter("payload_mass") if self.has_payload else 0.0
-        self.law = ComputedTorque(self.robot, self.parameter("kp"), self.parameter("kd"), self.parameter("ki"))
+        scale = self.parameter("gain_scale")
+        self.law = ComputedTorque(self.robot, scale * self.parameter("kp"), scale * self.parameter("kd"),
+                                  scale * self.parameter("ki"))
         super().configure()
 
     def output(self, t):

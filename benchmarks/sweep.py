@@ -1,0 +1,106 @@
+"""Benchmark: sweep throughput on local Dask workers, and the cost a sweep adds to each run.
+
+One experiment (default ``rrp-line``), N runs varying the controller's ``gain_scale`` (every
+run does the same work). Measured, in this order:
+
+- ``robofmu run``: the command as a user types it (a new interpreter, the FMUs, results.csv,
+  figures and report), best of two;
+- the master in-process: plan, instantiate, run and analyse one run, best of three (what each
+  sweep run does inside its worker);
+- the sweep with 1 and with 2 local worker processes (best of two sweeps each): runs per minute from the first run
+  submitted to the last row written (the cluster's start is given beside it: a fixed cost per
+  sweep, not per run), and the overhead per run against the in-process run.
+
+    make bench            # or: .venv/bin/python benchmarks/sweep.py [--runs N] [--fmus DIR] [EXPERIMENT]
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def single_run(experiment: str, fmus: str, work: Path) -> float:
+    best = float("inf")
+    for k in range(2):
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "robofmu.system.cli", "run", experiment, "--fmus", fmus,
+                        "--out", str(work / f"single-{k}")], check=True, capture_output=True)
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def in_process(experiment: str, fmus: str) -> float:
+    from robofmu.system.sweep.design import Design, parse_axis
+    from robofmu.system.sweep.run import check
+    from robofmu.system.sweep.worker import run_one
+
+    design = Design(experiment, [parse_axis("controller.gain_scale=1,1.001")])
+    system, *_ , runs = check(design, fmus)
+    times = []
+    for _ in range(3):
+        start = time.perf_counter()
+        record = run_one(system, runs[0], None, None)
+        assert record["status"] == "ok", record["message"]
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def sweep(experiment: str, fmus: str, workers: int, runs: int, work: Path) -> tuple[float, float, float]:
+    """Best of two sweeps: (runs per minute, cluster start in s, median run wall time in the workers in s)."""
+    return max(one_sweep(experiment, fmus, workers, runs, work) for _ in range(2))
+
+
+def one_sweep(experiment: str, fmus: str, workers: int, runs: int, work: Path) -> tuple[float, float, float]:
+    from robofmu.system.sweep import engine
+    from robofmu.system.sweep.design import Design, parse_axis
+    from robofmu.system.sweep.run import check
+
+    values = ",".join(f"{1 + 1e-3 * k:.3f}" for k in range(runs))
+    design = Design(experiment, [parse_axis(f"controller.gain_scale={values}")])
+    system, *_, listed = check(design, fmus)
+    start = time.perf_counter()
+    with engine.cluster_client(workers) as client:
+        client.wait_for_workers(workers)
+        ready = time.perf_counter()
+        records = []
+        engine.execute(client, system, list(enumerate(listed)), None, None, None,
+                       lambda index, record: records.append(record), tag=f"bench-{workers}")
+        done = time.perf_counter()
+    assert all(r["status"] == "ok" for r in records), [r["message"] for r in records]
+    return runs / (done - ready) * 60.0, ready - start, statistics.median(r["wall_time"] for r in records)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("experiment", nargs="?", default="rrp-line")
+    parser.add_argument("--runs", type=int, default=12, help="runs per sweep (default 12)")
+    parser.add_argument("--fmus", default="fmus")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as folder:
+        work = Path(folder)
+        cli = single_run(args.experiment, args.fmus, work)
+        inside = in_process(args.experiment, args.fmus)
+        one = sweep(args.experiment, args.fmus, 1, args.runs, work)
+        two = sweep(args.experiment, args.fmus, 2, args.runs, work)
+    print(f"\n## Sweep throughput: {args.experiment}, {args.runs} runs per sweep\n")
+    print("| | runs per minute | per run (s) | cluster start (s) | vs. 1 worker |")
+    print("|---|---|---|---|---|")
+    print(f"| `robofmu run` (new process, figures) | {60 / cli:.1f} | {cli:.3f} | — | — |")
+    print(f"| one run in-process (plan, run, metrics) | {60 / inside:.1f} | {inside:.3f} | — | — |")
+    for label, (rate, startup, median) in (("sweep, 1 worker", one), ("sweep, 2 workers", two)):
+        print(f"| {label} | {rate:.1f} | {60 / rate:.3f} (median in a worker {median:.3f}) | {startup:.2f} | "
+              f"{rate / one[0]:.2f}x |")
+    overhead = 60 / one[0] - inside
+    print(f"\nOverhead per run on 1 worker: {overhead:+.3f} s against the in-process run "
+          f"({overhead / inside * 100:+.0f} %); a `robofmu run` costs {cli / (60 / one[0]):.2f}x a sweep run.")
+    print(f"Two workers give {two[0] / one[0]:.2f}x the throughput of one (acceptance: at least 1.7x).")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,9 @@
+"""Sweeps and Monte Carlo runs of an experiment on Dask (``robofmu sweep``).
+
+- :mod:`.design`: what is varied and the list of runs;
+- :mod:`.worker`: one run in a worker, returning its record;
+- :mod:`.metrics`: the metrics of a record;
+- :mod:`.engine`: the Dask cluster, submission, retries, progress;
+- :mod:`.journal`: ``sweep.csv`` written as runs finish, and ``sweep.parquet``;
+- :mod:`.run`: the command's checks and flow; :mod:`.figures` and :mod:`.report`.
+"""

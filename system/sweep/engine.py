@@ -1,0 +1,154 @@
+"""Running the runs of a sweep on Dask: a local cluster by default, or an existing one by address.
+
+The embedded default is a :class:`distributed.LocalCluster` of ``workers`` single-threaded
+worker processes on this machine, started for the sweep and stopped after it. With
+``scheduler`` the same runs go to an existing Dask cluster (its workers need robofmu installed
+and the FMUs at the same path). Each worker process runs many co-simulations one after the
+other (:func:`robofmu.system.sweep.worker.run_one`); only the small records come back.
+
+A worker process that dies (a crash, a kill) loses the run it was executing: the scheduler
+runs it again elsewhere, once (``distributed.scheduler.allowed-failures`` is 1 on the local
+cluster); a run whose worker dies twice becomes a failed row. Records are handed to
+``on_record`` as they arrive, in completion order.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import time
+from contextlib import contextmanager
+from typing import Callable
+
+__all__ = ["PRELOAD", "SweepProgress", "cluster_client", "default_workers", "execute"]
+
+#: The module a worker preloads (it ignores SIGINT: Ctrl-C is the client's to handle).
+PRELOAD = "robofmu.system.sweep.worker"
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+@contextmanager
+def cluster_client(workers: int | None = None, scheduler: str | None = None, timeout: float = 10.0):
+    """A Dask client: of a new local cluster (``workers`` processes) or connected to ``scheduler``.
+
+    Raises
+    ------
+    ConnectionError
+        ``scheduler`` cannot be reached within ``timeout`` s (the message names the address).
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    quiet = {"distributed.scheduler.allowed-failures": 1,          # a run whose worker dies: retried once
+             "distributed.worker.preload": [PRELOAD],
+             "distributed.worker.daemon": False,
+             # the workers' event loops wake less often: their thread takes the GIL from the run's
+             "distributed.worker.profile.enabled": False,
+             "distributed.admin.tick.interval": "500ms", "distributed.admin.tick.limit": "30s",
+             "distributed.admin.system-monitor.interval": "2s",
+             "distributed.admin.system-monitor.gil.enabled": False,
+             "distributed.worker.memory.monitor-interval": "1s"}
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=timeout)
+        except (OSError, TimeoutError) as exc:
+            raise ConnectionError(f"--scheduler {scheduler}: cannot connect: {' '.join(str(exc).split())}") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    with dask.config.set(quiet):
+        cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+    client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
+
+
+class SweepProgress:
+    """One updating line: runs done and failed of the total, and the estimated time left."""
+
+    def __init__(self, label: str, total: int, skipped: int = 0, stream=sys.stderr):
+        self.label, self.total, self.skipped, self.stream = label, total, skipped, stream
+        self.done = self.failed = 0
+        self.start = time.perf_counter()
+        self.tty = stream.isatty()
+        self.shown = -1.0
+
+    def line(self) -> str:
+        elapsed = time.perf_counter() - self.start
+        now = self.done - self.skipped                    # finished in this invocation
+        left = elapsed / now * (self.total - self.done) if now else float("nan")
+        eta = "" if self.done == self.total else \
+            f", {_duration(left)} left" if now else ", estimating the time left"
+        reused = f" ({self.skipped} reused)" if self.skipped else ""
+        return (f"  {self.label}: {self.done}/{self.total} runs{reused}, {self.failed} failed, "
+                f"{_duration(elapsed)}{eta}")
+
+    def update(self, status: str | None = None) -> None:
+        if status is not None:
+            self.done += 1
+            self.failed += status != "ok"
+        fraction = self.done / self.total if self.total else 1.0
+        last = self.done == self.total
+        if not self.tty and not last and fraction - self.shown < 0.1 and self.shown >= 0:
+            return                                  # in a log: a line every tenth of the runs
+        self.shown = fraction
+        self.stream.write(self.line() + ("\r" if self.tty and not last else "\n"))
+        self.stream.flush()
+
+
+def _duration(seconds: float) -> str:
+    if seconds != seconds:
+        return "?"
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def execute(client, system, runs: list[tuple[int, dict]], stop_time, step, keep_folder,
+            on_record: Callable[[int, dict], None], tag: str) -> None:
+    """Submit every ``(index, values)`` run and hand each record to ``on_record`` as it arrives.
+
+    A run whose task fails without a record (its worker died twice: KilledWorker) becomes a
+    failed record naming that. KeyboardInterrupt cancels the runs not finished and propagates.
+    """
+    from distributed import as_completed
+
+    from .worker import run_one
+
+    futures = {}
+    for index, values in runs:
+        keep = None if keep_folder is None else str(keep_folder / f"run-{index:05d}")
+        future = client.submit(run_one, system, values, stop_time, step, keep, key=f"robofmu-{tag}-{index}",
+                               pure=False)
+        futures[future] = (index, values)
+    try:
+        for future in as_completed(list(futures)):
+            index, values = futures.pop(future)
+            if future.status == "finished":
+                record = future.result()
+            else:
+                exc = future.exception()
+                died = type(exc).__name__ == "KilledWorker"
+                reason = ("its worker process died twice while running it (crash or kill); it was retried once"
+                          if died else " ".join(f"{type(exc).__name__}: {exc}".split()))
+                record = dict(values, status="failed", message=reason)
+            future.release()
+            on_record(index, record)
+    except BaseException:
+        client.cancel(list(futures), force=True)
+        raise

@@ -1,0 +1,284 @@
+"""``robofmu sweep``: many runs of one experiment on Dask, written as they finish, with figures.
+
+Everything that can be checked is checked before a worker starts, and refused in one line
+(:class:`~robofmu.system.runner.UsageError` or the error of the file at fault): the design
+(:mod:`~robofmu.system.sweep.design`), the experiment, the FMU folder, each varied block and
+parameter (planned with the first run's values; every value typed against the FMU's variable),
+each varied step (a whole number of steps of the stop time), the output folder.
+
+The output folder is kept, not replaced: it holds ``sweep.json`` (the design), ``sweep.csv``
+(one row per finished run, appended as runs finish), and at the end ``sweep.parquet``, the
+figures and ``report.md``. A rerun of the same design into the same folder skips the runs
+already recorded (``retry_failed`` runs the failed ones again); a folder holding another sweep,
+or files robofmu did not write, is refused. Ctrl-C stops the sweep: every finished row stays,
+the Parquet file and a report of the finished rows are written, and :class:`SweepInterrupted`
+says how to continue.
+"""
+from __future__ import annotations
+
+import os
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import experiment
+from ..diagram import coerce, expand
+from ..master import DiagramError, Master
+from ..runner import UsageError, check_fmu_folder, check_roles, check_times, check_writable, timing
+from .design import STEP, Design
+from .engine import SweepProgress, cluster_client, default_workers, execute
+from .journal import Journal, key_of
+from .metrics import metric_names
+
+__all__ = ["SweepInterrupted", "SweepRun", "run_sweep"]
+
+#: What a sweep folder may hold (anything else: refused, so that no one's files are mixed in).
+OWNED_FILES = ("sweep.json", "sweep.csv", "sweep.csv.tmp", "sweep.parquet", "report.md")
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep: the message says how many rows were kept and how to continue."""
+
+
+@dataclass
+class SweepRun:
+    """A finished (or interrupted) sweep.
+
+    Attributes
+    ----------
+    design : Design
+    folder : Path
+    rows : list of dict
+        ``sweep.csv``'s rows in run order (text cells, as written).
+    metrics : list of str
+        The metric columns.
+    ran, reused : int
+        Runs executed now, and rows found from an earlier invocation.
+    seconds : float
+        Wall time of the runs executed now (s).
+    workers : int or None
+        Local worker processes (None: an existing cluster).
+    figures : list of Path
+    units : dict
+        Unit of each varied parameter and metric column that has one.
+    """
+
+    design: Design
+    folder: Path
+    rows: list
+    metrics: list
+    ran: int
+    reused: int
+    seconds: float
+    workers: int | None
+    figures: list = field(default_factory=list)
+    units: dict = field(default_factory=dict)
+    name: str = ""
+    description: str = ""
+
+    @property
+    def failed(self) -> list:
+        return [r for r in self.rows if r["status"] != "ok"]
+
+
+def _owned(entry: Path) -> bool:
+    return (entry.is_file() and (entry.name in OWNED_FILES or entry.suffix == ".png")) or \
+        (entry.is_dir() and entry.name == "runs")
+
+
+def _folder(out: Path, design: Design) -> bool:
+    """Check the output folder; True if it holds this design's earlier rows."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is a file, not a folder")
+    if not out.exists():
+        check_writable(out, "--out")
+        return False
+    entries = list(out.iterdir())
+    if not entries:
+        return False
+    marker = out / "sweep.json"
+    foreign = [e.name for e in entries if not _owned(e)]
+    if foreign or not marker.is_file():
+        shown = ", ".join(sorted(foreign or [e.name for e in entries])[:3])
+        raise UsageError(f"--out {out}: holds {shown}, not a robofmu sweep; give an empty folder, a new one, "
+                         "or the folder of this same sweep to continue it")
+    try:
+        earlier = Design.from_json(marker.read_text())
+    except (ValueError, KeyError, TypeError):
+        raise UsageError(f"--out {out}: sweep.json cannot be read; give another folder") from None
+    if not earlier.same_as(design):
+        raise UsageError(f"--out {out}: holds another sweep ({earlier.experiment}: "
+                         f"{'; '.join(a.describe() for a in earlier.axes)}); give another folder, or the same "
+                         "experiment and --vary / --samples / --seed / --step / --stop to continue it")
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise UsageError(f"--out {out}: no write permission")
+    return True
+
+
+def _typed(kind: str, value, what: str):
+    """A sweep value as the FMU variable's type (a whole float for an Integer)."""
+    if kind in ("Integer", "Enumeration") and isinstance(value, float) and value.is_integer():
+        value = int(value)
+    return coerce(kind, value, what)
+
+
+def check(design: Design, fmu_dir):
+    """The experiment's System (FMU paths absolute), checked against the design; its Roles,
+    metric columns, units and the design's runs with typed values."""
+    check_times(design.step, design.stop_time)
+    system = experiment.load(design.experiment, fmu_dir=fmu_dir)
+    system.fmu_dir = Path(os.path.abspath(system.fmu_dir))
+    steps = next((a.values for a in design.axes if a.name == STEP), ())
+    if any(a.name == STEP and a.random for a in design.axes):
+        raise UsageError("--vary step: the step is varied over a grid only (a comma list or a range)")
+    for h in steps or [design.step]:
+        try:
+            timing(system, h, design.stop_time)
+        except UsageError as exc:
+            raise UsageError(f"--vary step={h:g}: {exc}" if steps else str(exc)) from None
+    check_fmu_folder(system)
+    names = [b.name for b in system.blocks]
+    for axis in design.axes:
+        if axis.name != STEP and axis.block not in names:
+            raise UsageError(f"--vary {axis.name}: no block {axis.block!r} in {system.name} "
+                             f"(blocks: {', '.join(names)})")
+    runs = design.runs()
+    master = Master(experiment.with_parameters(system, {k: v for k, v in runs[0].items() if k != STEP}))
+    try:
+        master.check()
+    except DiagramError as exc:
+        raise DiagramError(f"{system.source or system.name} with --vary", exc.problems) from None
+    roles = check_roles(system, master)
+    units = {}
+    kinds = {}
+    for axis in design.axes:
+        if axis.name == STEP:
+            units[STEP] = "s"
+            continue
+        node = master.nodes[axis.block]
+        variables = [node.variables[v] for v in expand(node.variables, axis.parameter)]
+        if any(v.causality != "parameter" for v in variables):
+            raise UsageError(f"--vary {axis.name}: {axis.parameter!r} of {axis.block} is not a parameter")
+        kinds[axis.name] = variables[0].type
+        unit = getattr(variables[0], "unit", None) or getattr(getattr(variables[0], "declaredType", None), "unit", None)
+        if unit:
+            units[axis.name] = unit
+        for value in axis.values:
+            try:
+                _typed(kinds[axis.name], value, f"--vary {axis.name}")
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
+    typed = [{k: (v if k == STEP else _typed(kinds[k], v, k)) for k, v in run.items()} for run in runs]
+    model = roles.model()
+    metrics = metric_names(roles, model.n)
+    for name in metrics:
+        base = name.split("[")[0]
+        if base in ("max_tcp_error",):
+            units[name] = "m"
+        elif base == "settling_time":
+            units[name] = "s"
+    return system, roles, metrics, units, typed
+
+
+def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = "fmus", workers: int | None = None,
+              scheduler: str | None = None, keep_results: bool = False, retry_failed: bool = False,
+              progress: bool = True, figures: bool = True, metric: str | None = None,
+              threshold: float | None = None) -> SweepRun:
+    """Run every run of ``design`` not yet in ``out`` and write sweep.csv, Parquet, figures, report.
+
+    Parameters
+    ----------
+    design : Design
+    out : str or Path
+        The sweep folder (created; continued if it holds this design's earlier rows).
+    fmu_dir : str or Path
+        The FMU folder.
+    workers : int, optional
+        Local worker processes (default: the cores of this machine, at most one per run).
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``): run there instead.
+    keep_results : bool
+        Keep each run's ``results.csv`` under ``out/runs/run-NNNNN/``.
+    retry_failed : bool
+        Run the failed rows of an earlier invocation again.
+    progress : bool
+        Print a progress line to stderr.
+    figures : bool
+        Write the figures and the report's figure links.
+    metric : str, optional
+        The metric the figures map (default ``max_tcp_error`` where there is one, else
+        ``max_joint_error``).
+    threshold : float, optional
+        The level of ``metric`` drawn as a contour (default 1 mm for ``max_tcp_error``).
+
+    Raises
+    ------
+    ValueError
+        A mistake, before anything runs (UsageError, DesignError, ExperimentError, DiagramError).
+    ConnectionError
+        ``scheduler`` cannot be reached.
+    SweepInterrupted
+        Ctrl-C: the finished rows are kept (sweep.csv, sweep.parquet, report.md).
+    """
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers {workers}: must be at least 1")
+    out = Path(out)
+    system, roles, metrics, units, runs = check(design, fmu_dir)
+    if metric is not None and metric not in metrics:
+        raise UsageError(f"--metric {metric}: not a metric of this sweep (metrics: {', '.join(metrics[:4])}, ...)")
+    continuing = _folder(out, design)
+    with ExitStack() as stack:
+        client = stack.enter_context(cluster_client(None, scheduler)) if scheduler else None
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "sweep.json").write_text(design.to_json())
+        try:
+            journal = Journal(out, design.names, metrics)
+        except ValueError as exc:
+            raise UsageError(f"--out {out}: {exc}") from None
+        if retry_failed:
+            journal.forget_failed()
+        keys = [key_of(run, design.names) for run in runs]
+        reused = sum(k in journal.rows for k in keys) if continuing else 0
+        pending = [(i, run) for i, (run, k) in enumerate(zip(runs, keys)) if k not in journal.rows]
+        keep = None
+        if keep_results:
+            keep = (out / "runs").resolve()
+            keep.mkdir(exist_ok=True)
+        count = None if scheduler else min(workers or default_workers(), max(1, len(pending)))
+        meter = SweepProgress(system.name, len(runs), reused) if progress else None
+        if meter:
+            meter.done = reused
+            meter.failed = sum(journal.rows[k]["status"] != "ok" for k in keys if k in journal.rows)
+        start = time.perf_counter()
+
+        def arrived(index, record):
+            row = journal.append(record)
+            if meter:
+                meter.update(row["status"])
+
+        interrupted = False
+        try:
+            if pending:
+                if client is None:
+                    client = stack.enter_context(cluster_client(count))
+                if meter:
+                    where = f"the cluster at {scheduler}" if scheduler else \
+                        f"{count} local worker process" + "es" * (count != 1)
+                    meter.stream.write(f"  {system.name}: {len(pending)} runs on {where}\n")
+                execute(client, system, pending, design.stop_time, design.step, keep, arrived,
+                        tag=f"{os.getpid()}-{int(time.time() * 1e3)}")
+        except KeyboardInterrupt:
+            interrupted = True
+    seconds = time.perf_counter() - start
+    rows = journal.finish(keys)
+    result = SweepRun(design, out, rows, metrics, len(rows) - reused, reused, seconds, count, [], units,
+                      system.name, system.description)
+    from .report import write_report
+
+    write_report(result, figures=figures and not interrupted, metric=metric, threshold=threshold,
+                 interrupted=interrupted)
+    if interrupted:
+        raise SweepInterrupted(f"interrupted: {len(rows)} of {len(runs)} runs are in {out / 'sweep.csv'}; "
+                               "run the same command again to finish the rest")
+    return result

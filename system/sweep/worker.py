@@ -1,0 +1,85 @@
+"""One run of a sweep, as a Dask worker executes it: co-simulate, analyse, return a small record.
+
+:func:`run_one` never raises for a run that fails: the record says ``status = "failed"`` and
+the message names the block, the variable and the time (the master's
+:class:`~robofmu.system.master.SimulationError`). Runs in one process are serialised by a lock:
+all pythonfmu FMUs of a process share its one interpreter, so a worker started with several
+threads still runs one co-simulation at a time (start workers with ``--nthreads 1``).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from .. import analysis
+from ..experiment import with_parameters
+from ..master import Master, SimulationError
+from ..roles import Roles
+from .design import STEP
+from .metrics import metrics_of
+
+__all__ = ["run_one", "simulate"]
+
+_ONE_RUN_AT_A_TIME = threading.Lock()
+
+
+def simulate(system, values: dict, stop_time: float | None, step: float | None):
+    """Run ``system`` with the varied ``values`` set; returns (Result, Roles, Tracking).
+
+    ``values`` maps ``BLOCK.PARAM`` (and :data:`~robofmu.system.sweep.design.STEP`) to a value.
+    Raises what :meth:`Master.run` raises (SimulationError with the points recorded so far).
+    """
+    step = values.get(STEP, step)
+    configured = with_parameters(system, {k: v for k, v in values.items() if k != STEP})
+    master = Master(configured)
+    master.check()
+    roles = Roles.of(configured)
+    result = master.run(stop_time=stop_time, step=step)
+    return result, roles, analysis.tracking(result, roles)
+
+
+def run_one(system, values: dict, stop_time: float | None, step: float | None,
+            keep: str | None = None) -> dict:
+    """The record of one run: ``values``, the metrics, ``wall_time`` (s), ``status``, ``message``.
+
+    Parameters
+    ----------
+    system : System
+        The experiment's diagram (FMU paths absolute, reachable from this worker).
+    values : dict
+        The varied quantities of this run.
+    stop_time, step : float or None
+        Timing (s); None: the experiment's (a varied step takes precedence).
+    keep : str, optional
+        A folder to write this run's ``results.csv`` in (also the points before a failure).
+    """
+    start = time.perf_counter()
+    record = dict(values)
+    with _ONE_RUN_AT_A_TIME:
+        try:
+            result, roles, tracking = simulate(system, values, stop_time, step)
+        except SimulationError as exc:
+            if keep and exc.result is not None and len(exc.result.time):
+                exc.result.to_csv(Path(keep) / "results.csv")
+            record.update(status="failed", message=" ".join(str(exc).split()))
+        except Exception as exc:         # a diagram this value breaks, a file gone: the row says which
+            record.update(status="failed", message=" ".join(f"{type(exc).__name__}: {exc}".split()))
+        else:
+            record.update(metrics_of(tracking, result, roles), status="ok", message="")
+            if keep:
+                result.to_csv(Path(keep) / "results.csv")
+    record["wall_time"] = time.perf_counter() - start
+    return record
+
+
+def dask_setup(worker) -> None:
+    """Dask worker preload (``--preload robofmu.system.sweep.worker``): ignore SIGINT.
+
+    Ctrl-C in a terminal reaches every process of the foreground group, the local workers too;
+    the sweep's client handles it (keeps the finished rows, stops the cluster), so a worker
+    must not die of it half-way through a run.
+    """
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -10,7 +10,10 @@ Exit status and messages, for every command:
 - **1**: the work itself failed (a co-simulation step, an FMU that fails to initialize; for
   ``doctor``: a problem found), one line per failure.
 - **130**: interrupted (Ctrl-C). ``robofmu run`` stops at the next communication point, frees
-  the FMUs and writes what was recorded so far.
+  the FMUs and writes what was recorded so far; ``robofmu sweep`` keeps every finished row.
+
+``robofmu sweep`` exits 0 when every run has a row, failed runs included: a run that fails is a
+finding of the sweep (a row with its status and message), not a failure of the command.
 """
 from __future__ import annotations
 

@@ -294,3 +294,22 @@ def test_run_set_refuses_a_bad_setting(fmu_root, tmp_path):
     assert done.returncode == 2 and "--set controller.kp: expected BLOCK.PARAM=VALUE" in done.stderr
     done = cli("run", EXPERIMENT, "--set", "nothing.kp=3", "--fmus", fmu_root, "--out", tmp_path / "o", cwd=tmp_path)
     assert done.returncode == 2 and "--set nothing.kp: no block 'nothing'" in done.stderr
+
+
+def test_random_samples_crossed_with_steps(grid, fmu_root):
+    """Random sampling (reproducible: the values are numpy's draws for the seed) crossed with a
+    varied communication step; histograms and scatter plots for random designs."""
+    work, _, _ = grid
+    folder = work / "random"
+    done = cli("sweep", EXPERIMENT, "--vary", "step=0.001,0.002", "--vary", "controller.kp=uniform(100,400)",
+               "--samples", 2, "--seed", 3, "--stop", STOP, "--workers", 2, "--fmus", fmu_root, "--out", folder,
+               cwd=work)
+    assert done.returncode == 0, done.stderr
+    table = rows(folder)
+    draws = np.random.default_rng(3).uniform(100, 400, 2)
+    assert [(float(r["step"]), float(r["controller.kp"])) for r in table] == \
+        [(h, kp) for h in (0.001, 0.002) for kp in draws]
+    assert all(r["status"] == "ok" for r in table)
+    # the same gains at a coarser step: a larger tracking error
+    assert float(table[2]["max_tcp_error"]) > float(table[0]["max_tcp_error"])
+    assert (folder / "histograms.png").is_file() and (folder / "scatter.png").is_file()

@@ -23,7 +23,9 @@ class ComputedTorque:
     Notes
     -----
     The integral z is advanced by :meth:`advance` with the error held over the step
-    (z += e h), matching the zero-order hold of a sampled controller.
+    (z += e h), matching the zero-order hold of a sampled controller. The torque is the model's
+    inverse dynamics at the commanded acceleration u = qdd_ref + kd e_dot + kp e + ki z: one
+    recursive Newton-Euler pass on a serial robot instead of M(q) (CRBA) and N(q, qd) apart.
     """
 
     def __init__(self, robot: RobotModel, kp: float, kd: float, ki: float = 0.0):
@@ -38,7 +40,7 @@ class ComputedTorque:
         """Joint torques/forces (N.m or N), shape (n,), at the current instant."""
         u = (np.asarray(qdd_ref) + self.kd * (np.asarray(qd_ref) - qd)
              + self.kp * (np.asarray(q_ref) - q) + self.ki * self.z)
-        return self.robot.mass_matrix(q) @ u + self.robot.nonlinear_effects(q, qd)
+        return self.robot.inverse_dynamics(q, qd, u)        # M(q) u + N(q, qd) in one pass (RNEA)
 
     def advance(self, q_ref, q, h: float) -> None:
         """Integrate the error over a step of ``h`` seconds (error held at its current value)."""

@@ -86,7 +86,8 @@ def _run(args) -> int:
     try:
         parameters = dict(parse_setting(text) for text in args.set or [])
         run = run_experiment(args.experiment, out, fmu_dir=args.fmus, step=args.step,
-                             stop_time=args.stop, algorithm=args.algorithm, parameters=parameters)
+                             stop_time=args.stop, algorithm=args.algorithm, parameters=parameters,
+                             results_format=args.format)
     except Interrupted as exc:
         _say("run", exc)
         return 130
@@ -97,7 +98,7 @@ def _run(args) -> int:
         _say("run", exc)
         return 2
     print(run.section)
-    print(f"\nwrote {out / 'results.csv'}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
+    print(f"\nwrote {out / ('results.' + args.format)}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
     return 0
 
 
@@ -246,6 +247,8 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.add_argument("--set", action="append", metavar="BLOCK.PARAM=VALUE",
                    help="set a block parameter over the experiment's (repeatable), e.g. controller.kp=400")
+    p.add_argument("--format", choices=["csv", "parquet"], default="csv",
+                   help="results.csv (default) or results.parquet: binary, exact, with units; for large runs")
     p.set_defaults(func=_run)
 
     p = sub.add_parser("sweep", help="many runs of one experiment over parameter grids or random samples, on Dask",

@@ -157,7 +157,8 @@ class Master:
     record : list of str, optional
         The outputs to record, each entry an exact ``instance.variable`` (``plant.q[2]``), a
         vector base (``plant.q``) or an fnmatch pattern (``plant.*``); default all outputs. An
-        entry that names no output is refused by :meth:`check` (DiagramError).
+        entry that names no output is refused by :meth:`check` (DiagramError). Outputs neither
+        recorded nor wired are not read at all.
     progress : callable, optional
         ``progress(fraction, t)`` about 20 times in a run (t in s).
     log : callable, optional
@@ -322,14 +323,19 @@ class Master:
                 raise SimulationError(f"{exc}", name, start_time, None) from None
 
     def _layout(self) -> None:
-        """Signal vectors, ports, recorded columns and their units."""
-        real_outputs, boolean_outputs = [], []          # (instance, ScalarVariable), evaluation order
-        for name in self.order:
-            for variable in self.nodes[name].model_description.modelVariables:
-                if variable.causality == "output" and variable.type == "Real":
-                    real_outputs.append((name, variable))
-                elif variable.causality == "output" and variable.type == "Boolean":
-                    boolean_outputs.append((name, variable))
+        """Signal vectors, ports, recorded columns and their units.
+
+        Only the outputs that are wired to an input or recorded are read (all of them with the
+        default ``record``); an output nothing uses costs no FMI call.
+        """
+        outputs = [(name, variable) for name in self.order
+                   for variable in self.nodes[name].model_description.modelVariables
+                   if variable.causality == "output" and variable.type in ("Real", "Boolean")]
+        recorded = {k for k in select([f"{name}.{v.name}" for name, v in outputs], self.record)}
+        wired = {(link.source, link.output) for link in self.links}
+        read = [(name, v) for k, (name, v) in enumerate(outputs) if k in recorded or (name, v.name) in wired]
+        real_outputs = [(name, v) for name, v in read if v.type == "Real"]           # evaluation order
+        boolean_outputs = [(name, v) for name, v in read if v.type == "Boolean"]
         self.real_signals = np.zeros(len(real_outputs))
         self.boolean_signals = np.zeros(len(boolean_outputs), dtype=np.int32)
         real_index = {(block, v.name): k for k, (block, v) in enumerate(real_outputs)}

@@ -46,6 +46,11 @@ class Roles:
             raise ValueError(f"{system.name}: the experiment names no `robot`")
         return cls(robot=str(robot), **dict(system.extra.get("roles", {})))
 
+    def signals(self) -> list[str]:
+        """The vector bases of every role the experiment declares (what analysis reads)."""
+        return [getattr(self, role) for role in ("q", "qd", "q_ref", "tau", "x_ref", "x", "grip")
+                if getattr(self, role) is not None]
+
     def require(self, *names: str) -> None:
         missing = [n for n in names if getattr(self, n) is None]
         if missing:

@@ -105,7 +105,8 @@ def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]
 # -- the output folder -----------------------------------------------------------------------------
 def is_run_output(entry: Path) -> bool:
     """Whether ``entry`` (in an output folder) is something ``robofmu run`` writes."""
-    return entry.is_file() and (entry.name in ("results.csv", "report.md") or entry.suffix == ".png")
+    return entry.is_file() and (entry.name in ("results.csv", "results.parquet", "report.md")
+                                or entry.suffix == ".png")
 
 
 class OutputFolder:
@@ -347,7 +348,7 @@ def _short_report(name: str, text: str) -> str:
 
 def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus", step: float | None = None,
                    stop_time: float | None = None, algorithm: str | None = None, progress: bool = True,
-                   figures: bool = True, parameters: dict | None = None) -> Run:
+                   figures: bool = True, parameters: dict | None = None, results_format: str = "csv") -> Run:
     """Run experiment ``name`` and write ``out_dir/results.csv``, its figures and ``report.md``.
 
     Everything is checked before the first FMU is instantiated (see the module notes); the
@@ -371,6 +372,9 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     parameters : dict, optional
         Block parameters to set over the experiment's, ``{"controller.kp": 400.0}``
         (``robofmu run --set``).
+    results_format : {"csv", "parquet"}
+        ``results.csv`` (default) or ``results.parquet`` (binary, exact, with units; for large
+        runs: about 30x faster to write).
 
     Returns
     -------
@@ -389,6 +393,9 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
         short report naming the failure.
     """
     check_times(step, stop_time)
+    if results_format not in ("csv", "parquet"):
+        raise UsageError(f"--format {results_format}: choose csv or parquet")
+    results = f"results.{results_format}"
     folder = OutputFolder(out_dir)
     system = experiment.load(name, fmu_dir=fmu_dir)
     if parameters:
@@ -418,29 +425,29 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
                 folder.discard()
                 raise type(exc)(f"{exc.reason} (nothing recorded; {final} untouched)", exc.block, exc.time, kept,
                                 exc.reason) from None
-            kept.to_csv(out / "results.csv")
-            points = f"results.csv holds the {len(kept.time)} points up to t = {kept.time[-1]:.9g} s"
+            kept.write(out / results)
+            points = f"{results} holds the {len(kept.time)} points up to t = {kept.time[-1]:.9g} s"
             if isinstance(exc, Interrupted):
                 text = f"Interrupted (SIGINT) {exc.reason.removeprefix('interrupted ')}; {points}; no figures."
             else:
                 text = f"The run failed: {' '.join(exc.reason.split())}\n\n{points}; no figures."
             (out / "report.md").write_text(_short_report(system.name, text))
             folder.commit()
-            where = (f"; results up to t = {kept.time[-1]:.9g} s in {final / 'results.csv'} "
+            where = (f"; results up to t = {kept.time[-1]:.9g} s in {final / results} "
                      f"(report: {final / 'report.md'})")
             raise type(exc)(exc.reason + where, exc.block, exc.time, kept, exc.reason) from None
-        result.to_csv(out / "results.csv")
+        result.write(out / results)
         try:
             metrics = analysis.tracking(result, roles)
             section = analysis.tracking_report(system.name, system.description, metrics, result)
             made = figures_of(system, result, roles, out, master.order) if figures else []
         except KeyboardInterrupt:
             (out / "report.md").write_text(_short_report(
-                system.name, f"The run is complete (results.csv, {len(result.time)} points); interrupted "
+                system.name, f"The run is complete ({results}, {len(result.time)} points); interrupted "
                              "(SIGINT) while writing the report and figures."))
             folder.commit()
             raise Interrupted(f"interrupted while writing the report and figures; the complete results are "
-                              f"in {final / 'results.csv'}", None, float(result.time[-1]), result,
+                              f"in {final / results}", None, float(result.time[-1]), result,
                               "interrupted while writing the report and figures") from None
         (out / "report.md").write_text(f"# {system.name}\n\n" + section + "\n\n"
                                        + "\n".join(f"![{p.stem}]({p.name})" for p in made) + "\n")

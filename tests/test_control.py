@@ -5,7 +5,7 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from robofmu.components.control import ComputedTorque
-from robofmu.components.robots import RobotModel, load_model
+from robofmu.components.robots import RobotModel, available, load_model
 
 
 def closed_loop(plant: RobotModel, law: ComputedTorque, q_ref, q0, t_end):
@@ -93,3 +93,20 @@ def test_integral_advances_with_the_held_error():
 def test_invalid_gain_names_it(name, kwargs):
     with pytest.raises(ValueError, match=f"{name}: gain must be finite and >= 0"):
         ComputedTorque(load_model("chess"), **kwargs)
+
+
+@pytest.mark.parametrize("robot", available())
+def test_the_law_is_mass_matrix_times_command_plus_nonlinear_effects(robot, rng):
+    """tau (one inverse-dynamics pass) = M(q) u + N(q, qd), M and N computed apart, on every robot."""
+    model = load_model(robot)
+    law = ComputedTorque(model, 400.0, 20.0, 75.0)
+    law.z[:] = rng.normal(0.0, 1e-3, model.n)
+    home = model.configuration("home")
+    for _ in range(5):
+        q = home + rng.normal(0.0, 0.05, model.n)
+        qd, q_ref, qd_ref, qdd_ref = (rng.normal(0.0, 0.3, model.n) for _ in range(4))
+        q_ref = q + 0.01 * q_ref
+        u = qdd_ref + 20.0 * (qd_ref - qd) + 400.0 * (q_ref - q) + 75.0 * law.z
+        expected = model.mass_matrix(q) @ u + model.nonlinear_effects(q, qd)
+        np.testing.assert_allclose(law.torque(q_ref, qd_ref, qdd_ref, q, qd), expected,
+                                   rtol=1e-12, atol=1e-12 * np.max(np.abs(expected)))

@@ -291,3 +291,18 @@ def test_experiments_carry_their_robot_and_roles(name, robot):
     assert {"q", "qd", "q_ref", "tau"} <= set(roles)
     gains = load_description(robot).gain_set("pd")
     assert {k: s.block("controller").parameters[k] for k in ("kp", "kd", "ki")} == gains.as_dict()
+
+
+def test_outputs_neither_wired_nor_recorded_are_not_read(fmu_root):
+    """With a record selection the master reads only what is wired or recorded (the IK's
+    `reachable` is neither here), and the recorded values equal a full recording's exactly."""
+    system = experiment.load("rrp-line", fmu_dir=fmu_root)
+    full = Master(system)
+    everything = full.run(stop_time=0.2)
+    lean = Master(system, record=["plant.q", "controller.tau"])
+    few = lean.run(stop_time=0.2)
+    assert "ik.reachable" in full.boolean_names and "ik.reachable" not in lean.boolean_names
+    assert "fk.x[1]" in full.real_names and "fk.x[1]" not in lean.real_names      # fk feeds nothing
+    assert "ik.q_ref[1]" in lean.real_names                                         # wired to the controller
+    assert few.columns == [c for c in everything.columns if c.startswith(("plant.q[", "controller.tau["))]
+    np.testing.assert_array_equal(few.data, everything.data[:, [everything.columns.index(c) for c in few.columns]])

@@ -24,17 +24,19 @@ __all__ = ["run_one", "simulate"]
 _ONE_RUN_AT_A_TIME = threading.Lock()
 
 
-def simulate(system, values: dict, stop_time: float | None, step: float | None):
+def simulate(system, values: dict, stop_time: float | None, step: float | None, everything: bool = False):
     """Run ``system`` with the varied ``values`` set; returns (Result, Roles, Tracking).
 
     ``values`` maps ``BLOCK.PARAM`` (and :data:`~robofmu.system.sweep.design.STEP`) to a value.
+    Only the signals the metrics read (the experiment's roles) are recorded, unless
+    ``everything``; the values are the same either way (reading an output changes nothing).
     Raises what :meth:`Master.run` raises (SimulationError with the points recorded so far).
     """
     step = values.get(STEP, step)
     configured = with_parameters(system, {k: v for k, v in values.items() if k != STEP})
-    master = Master(configured)
-    master.check()
     roles = Roles.of(configured)
+    master = Master(configured, record=None if everything else roles.signals())
+    master.check()
     result = master.run(stop_time=stop_time, step=step)
     return result, roles, analysis.tracking(result, roles)
 
@@ -58,7 +60,7 @@ def run_one(system, values: dict, stop_time: float | None, step: float | None,
     record = dict(values)
     with _ONE_RUN_AT_A_TIME:
         try:
-            result, roles, tracking = simulate(system, values, stop_time, step)
+            result, roles, tracking = simulate(system, values, stop_time, step, everything=bool(keep))
         except SimulationError as exc:
             if keep and exc.result is not None and len(exc.result.time):
                 exc.result.to_csv(Path(keep) / "results.csv")

@@ -99,3 +99,17 @@ def test_settling_time_of_an_exponential_error():
     assert math.isnan(settling_time(t, np.sin(t)[:, None], q))                  # the reference never rests
     assert math.isnan(settling_time(t, np.zeros_like(q), q))                    # nothing moves
     assert settling_time(t, q_ref, q_ref) == 0.0
+
+
+def test_parquet_follows_the_rows_as_they_arrive(tmp_path, monkeypatch):
+    import pyarrow.parquet as pq
+
+    from robofmu.system.sweep import journal as module
+
+    monkeypatch.setattr(module, "PARQUET_EVERY", 0.0)          # rewrite at every row
+    journal = Journal(tmp_path, ["a.x"], ["m"])
+    for k in range(3):
+        journal.append({"a.x": k / 10, "m": k / 3, "wall_time": 1.0, "status": "ok", "message": ""})
+        table = pq.read_table(tmp_path / "sweep.parquet").to_pydict()
+        assert table["a.x"] == [j / 10 for j in range(k + 1)] and table["m"] == [j / 3 for j in range(k + 1)]
+    assert not (tmp_path / "sweep.parquet.tmp").exists()

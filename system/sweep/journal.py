@@ -2,21 +2,27 @@
 
 A row is written (and flushed to disk) as soon as its run's record arrives, so an interrupted
 sweep keeps every finished run, and a rerun into the same folder reads them back and skips
-them. A row is identified by its varied values, written exactly (``repr`` of the float); a line
-cut short by a crash is dropped when the file is read back. :meth:`Journal.finish` rewrites the
-file in the order of the runs and writes ``sweep.parquet`` beside it.
+them. ``sweep.parquet`` beside it is rewritten (atomically) at most every
+:data:`PARQUET_EVERY` seconds while rows arrive, so it is never far behind. A row is identified
+by its varied values, written exactly (``repr`` of the float); a line cut short by a crash is
+dropped when the file is read back. :meth:`Journal.finish` rewrites both files in the order of
+the runs.
 """
 from __future__ import annotations
 
 import csv
 import math
 import os
+import time
 from pathlib import Path
 
 __all__ = ["Journal", "cell", "key_of"]
 
 #: The columns after the metrics.
 TRAILER = ["wall_time", "status", "message"]
+
+#: Seconds between rewrites of ``sweep.parquet`` while rows arrive.
+PARQUET_EVERY = 5.0
 
 
 def cell(value) -> str:
@@ -50,6 +56,7 @@ class Journal:
         self.names = names
         self.columns = [*names, *metrics, *TRAILER]
         self.rows: dict[tuple, dict[str, str]] = {}
+        self._parquet_at = time.monotonic()
         if self.path.is_file():
             self._read()
         self._file = None
@@ -97,6 +104,8 @@ class Journal:
         self._file.flush()
         os.fsync(self._file.fileno())
         self.rows[tuple(row[n] for n in self.names)] = row
+        if time.monotonic() - self._parquet_at >= PARQUET_EVERY:
+            self.write_parquet(list(self.rows.values()))
         return row
 
     def close(self) -> None:
@@ -127,5 +136,8 @@ class Journal:
             else:
                 table[c] = pa.array([float(t) if t else float("nan") for t in texts], pa.float64())
         path = self.path.with_suffix(".parquet")
-        pq.write_table(pa.table(table), path)
+        temporary = path.with_suffix(".parquet.tmp")
+        pq.write_table(pa.table(table), temporary)
+        os.replace(temporary, path)
+        self._parquet_at = time.monotonic()
         return path

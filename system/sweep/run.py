@@ -34,7 +34,7 @@ from .metrics import metric_names
 __all__ = ["SweepInterrupted", "SweepRun", "run_sweep"]
 
 #: What a sweep folder may hold (anything else: refused, so that no one's files are mixed in).
-OWNED_FILES = ("sweep.json", "sweep.csv", "sweep.csv.tmp", "sweep.parquet", "report.md")
+OWNED_FILES = ("sweep.json", "sweep.csv", "sweep.csv.tmp", "sweep.parquet", "sweep.parquet.tmp", "report.md")
 
 
 class SweepInterrupted(KeyboardInterrupt):

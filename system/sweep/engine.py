@@ -54,7 +54,8 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, tim
              "distributed.admin.tick.interval": "500ms", "distributed.admin.tick.limit": "30s",
              "distributed.admin.system-monitor.interval": "2s",
              "distributed.admin.system-monitor.gil.enabled": False,
-             "distributed.worker.memory.monitor-interval": "1s"}
+             "distributed.worker.memory.monitor-interval": "1s",
+             "distributed.scheduler.work-stealing": False}          # equal runs: the queue balances them
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout=timeout)

@@ -48,6 +48,7 @@ def one_block(path: Path, robot: str, kind: str):
     vout = [v.valueReference for v in reals_out]
     vbool = [v.valueReference for v in bools_out]
     slave = fmu.slave
+    clock = [0, 0]              # steps taken by the FMU and by the logic: time goes on across repeats
 
     def fmi(k):
         if vin:
@@ -55,7 +56,8 @@ def one_block(path: Path, robot: str, kind: str):
         slave.getReal(vout)
         if vbool:
             slave.getBoolean(vbool)
-        slave.doStep(k * H, H)
+        slave.doStep(clock[0] * H, H)          # the FMU refuses a point that does not continue its time
+        clock[0] += 1
 
     logic = make_block(robot, kind)
     logic.configure()
@@ -63,9 +65,11 @@ def one_block(path: Path, robot: str, kind: str):
     start = np.array(values)
 
     def direct(k):
+        t = clock[1] * H
         logic.values[slots] = start
-        logic.output(k * H)
-        logic.advance(k * H, H)
+        logic.output(t)
+        logic.advance(t, H)
+        clock[1] += 1
 
     return fmu, fmi, direct
 

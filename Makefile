@@ -31,6 +31,7 @@ demo: $(FMU_STAMP)
 
 bench: $(FMU_STAMP)
 	$(PY) benchmarks/run.py
+	$(PY) benchmarks/split.py
 	$(PY) benchmarks/loop.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/sweep.py

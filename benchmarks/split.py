@@ -1,0 +1,145 @@
+"""Benchmark: where one block-step of an experiment's blocks goes — the block's logic, robofmu's
+FMU-side wrapper, and the FMI boundary — and how many FMI calls the master makes per step.
+
+For each block of the experiment (default chess-pd), one communication step as the master
+makes it (set the wired Real inputs, get the outputs it reads, doStep), fed with the block's
+start values, timed three ways in this process:
+
+- ``logic``: the FMI-free block (``robofmu.components.blocks``): set inputs, output, advance;
+- ``in-process slave``: robofmu's pythonfmu slave class (``BlockSlave``) called directly from
+  Python with lists, as pythonfmu's C++ layer calls it: logic + the FMU-side wrapper;
+- ``through FMI``: the built FMU, called through the master's own bound functions
+  (``ctypes.PyDLL``, preallocated arrays): logic + wrapper + the boundary (ctypes, pythonfmu's
+  C++ layer, robofmu's export library).
+
+``wrapper`` is the second minus the first, ``boundary`` the third minus the second.
+
+    make bench            # or: .venv/bin/python benchmarks/split.py [--experiment chess-pd] [--fmus DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import sys
+import time
+
+import numpy as np
+
+import robofmu.components  # noqa: F401  (the installed copy before any bundled one)
+from robofmu.components.blocks import make_block
+from robofmu.components.fmi.base import BlockSlave
+from robofmu.system import experiment
+from robofmu.system.fmu import Block
+from robofmu.system.master import Master, _Fmi2Functions
+
+H = 1e-3
+
+
+def best_per_step(step, steps: int, repeats: int) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        for _ in range(steps):
+            step()
+        best = min(best, (time.perf_counter() - start) / steps)
+    return best
+
+
+def ports(master: Master, name: str):
+    """The value references the master sets (Real inputs wired) and gets (outputs read) on ``name``."""
+    get_real, get_boolean, early, late = master.ports[name]
+    inputs = list(early.real.references)[:early.real.count] + list(late.real.references)[:late.real.count]
+    return inputs, list(get_real.references)[:get_real.count], list(get_boolean.references)[:get_boolean.count]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--experiment", default="chess-pd")
+    parser.add_argument("--fmus", default="fmus")
+    parser.add_argument("--steps", type=int, default=2000)
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args(argv)
+    system = experiment.load(args.experiment, fmu_dir=args.fmus)
+    robot = system.extra["robot"]
+    master = Master(system)
+    master.check()
+    master._layout()
+    rows, calls = [], 0
+    for name in master.order:
+        node = master.nodes[name]
+        kind = node.path.stem
+        vin, vout, vbool = ports(master, name)
+        starts = {v.valueReference: float(v.start) if v.start is not None else 0.0
+                  for v in node.model_description.modelVariables if v.type == "Real"}
+        values = [starts[vr] for vr in vin]
+        calls += bool(vin) + bool(vout) + bool(vbool) + 1
+
+        logic = make_block(robot, kind)
+        logic.configure()
+        clock = [0]
+
+        def direct(logic=logic, slots=np.array(vin, dtype=np.intp), start=np.array(values), clock=clock):
+            t = clock[0] * H
+            logic.values[slots] = start
+            logic.output(t)
+            logic.advance(t, H)
+            clock[0] += 1
+
+        cls = type(f"bench_{robot}_{kind}", (BlockSlave,), {"robot_name": robot, "block_kind": kind})
+        slave = cls(instance_name=name)
+        slave.setup_experiment(0.0)
+        slave.enter_initialization_mode()
+        slave.exit_initialization_mode()
+        slave_clock = [0]
+
+        def in_process(slave=slave, clock=slave_clock):
+            if vin:
+                slave.set_real(vin, values)
+            slave.get_real(vout)
+            if vbool:
+                slave.get_boolean(vbool)
+            slave.do_step(clock[0] * H, H)
+            clock[0] += 1
+
+        fmu = Block(node.path, name)
+        fmu.initialize()
+        functions = _Fmi2Functions(fmu.slave)
+        c_in = (ctypes.c_uint * max(1, len(vin)))(*vin)
+        c_values = (ctypes.c_double * max(1, len(vin)))(*values)
+        c_out = (ctypes.c_uint * max(1, len(vout)))(*vout)
+        c_read = (ctypes.c_double * max(1, len(vout)))()
+        c_bool = (ctypes.c_uint * max(1, len(vbool)))(*vbool)
+        c_bools = (ctypes.c_int * max(1, len(vbool)))()
+        fmi_clock = [0]
+
+        def through_fmi(f=functions, c=functions.component, clock=fmi_clock):
+            if vin:
+                f.set_real(c, c_in, len(vin), c_values)
+            f.get_real(c, c_out, len(vout), c_read)
+            if vbool:
+                f.get_boolean(c, c_bool, len(vbool), c_bools)
+            if f.do_step(c, clock[0] * H, H, 1) > 1:
+                raise RuntimeError(f"{name}: fmi2DoStep failed: {fmu.messages[-1:]}")
+            clock[0] += 1
+
+        try:
+            t_logic = best_per_step(direct, args.steps, args.repeats)
+            t_slave = best_per_step(in_process, args.steps, args.repeats)
+            t_fmi = best_per_step(through_fmi, args.steps, args.repeats)
+        finally:
+            fmu.close()
+        rows.append((name, t_logic, t_slave - t_logic, t_fmi - t_slave, t_fmi, bool(vin) + bool(vout) + bool(vbool) + 1))
+    print(f"\n## Where a step goes: {args.experiment} (best of {args.repeats} x {args.steps} steps, µs per step)\n")
+    print("| block | logic | FMU-side wrapper | FMI boundary | total | FMI calls |")
+    print("|---|---|---|---|---|---|")
+    for name, logic, wrapper, boundary, total, n in rows:
+        print(f"| {name} | {logic * 1e6:.1f} | {wrapper * 1e6:.1f} | {boundary * 1e6:.1f} | {total * 1e6:.1f} | {n} |")
+    total = [sum(r[k] for r in rows) for k in range(1, 5)]
+    print(f"| all | {total[0] * 1e6:.1f} | {total[1] * 1e6:.1f} | {total[2] * 1e6:.1f} | {total[3] * 1e6:.1f} | {calls} |")
+    print(f"\nFMU-side wrapper: {total[1] / len(rows) * 1e6:.1f} µs per block-step on average "
+          f"({len(rows)} blocks); {calls} FMI calls per communication step (Boolean inputs only when they change).")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

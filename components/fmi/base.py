@@ -103,6 +103,7 @@ class BlockSlave(Fmi2Slave):
                                                     step_size=1e-3)
         self.time = 0.0
         self._dirty = True
+        self._inputs_checked = False     # the current inputs were found finite (reset by any set)
         self._initialized = False
         self._terminated = False
         self._held_warned = False
@@ -118,6 +119,9 @@ class BlockSlave(Fmi2Slave):
         self._input_vrs = np.flatnonzero(self._input_real)
         self._input_mask = self._input_real.astype(float)
         self._output_slots = np.flatnonzero(self._real & (causalities == "output"))
+        self._held = np.empty(len(self._output_slots))      # outputs kept while new ones are computed
+        self._output_mask = np.zeros(len(kinds))
+        self._output_mask[self._output_slots] = 1.0
         self._parameter_slots = np.flatnonzero(self._real & (causalities == "parameter"))
         self._indices: dict[tuple, np.ndarray] = {}
         self._names = [v.name for v in self.logic.variables]
@@ -158,6 +162,7 @@ class BlockSlave(Fmi2Slave):
                 else:
                     settings[name] = value
                 self._dirty = True
+                self._inputs_checked = False
         variability = "fixed" if v.causality == "parameter" else (
             "continuous" if v.kind == "Real" else "discrete")
         initial = {"parameter": "exact", "output": "calculated"}.get(v.causality)
@@ -218,6 +223,7 @@ class BlockSlave(Fmi2Slave):
         allowed = self._input_real if self._initialized else self._settable_real
         self.values[self._index(vrs, allowed, "fmi2SetReal")] = values
         self._dirty = True
+        self._inputs_checked = False
 
     def _check_kind(self, vrs, kind: str, call: str, setting: bool = False) -> None:
         """Refuse value references that are not ``kind`` variables (or, when ``setting``, not
@@ -329,8 +335,10 @@ class BlockSlave(Fmi2Slave):
 
     def _nonfinite_output(self) -> str | None:
         """Why the outputs just computed are not finite (naming the largest input), or None."""
+        if math.isfinite(self.values.dot(self._output_mask)):     # fast path: nan and inf propagate
+            return None
         outputs = self.values[self._output_slots]
-        if math.isfinite(float(outputs.sum())):
+        if np.isfinite(outputs).all():                           # a non-finite value elsewhere
             return None
         k = int(self._output_slots[np.flatnonzero(~np.isfinite(outputs))[0]])
         cause = ""
@@ -347,13 +355,14 @@ class BlockSlave(Fmi2Slave):
         """Outputs at the current time from the current inputs; never a non-finite one: a
         non-finite input or output holds the previous outputs and makes the next step fail."""
         bad = self.nonfinite_input()
+        self._inputs_checked = bad is None
         if bad is not None:
             if not self._held_warned:
                 self.warn(f"input {bad} at t = {self.time:.9g} s is not finite: outputs held at their "
                           "last values; the next step will fail")
                 self._held_warned = True
             return
-        held = self.values[self._output_slots].copy()
+        held = self.values.take(self._output_slots, out=self._held)
         try:
             with np.errstate(all="ignore"):    # an overflow is reported below, not as a host warning
                 self.logic.output(self.time)
@@ -390,7 +399,7 @@ class BlockSlave(Fmi2Slave):
         if problem is not None:
             return self.fail(problem)
         try:
-            bad = self.nonfinite_input()
+            bad = None if self._inputs_checked else self.nonfinite_input()     # once per step
             if bad is not None:
                 return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
             if self._dirty:
@@ -468,6 +477,7 @@ class BlockSlave(Fmi2Slave):
         self.values[:] = state["values"]
         self.logic.settings.update(state["settings"])
         self._dirty = bool(state["dirty"])
+        self._inputs_checked = False
         self._initialized = bool(state["initialized"])
         self._terminated = bool(state["terminated"])
         self._bad_output = state["bad_output"]

@@ -110,9 +110,9 @@ class Result:
         data = np.column_stack([table.column(k).to_numpy() for k in range(1, len(names))]) \
             if len(names) > 1 else np.empty((table.num_rows, 0))
         units = {}
-        for field in list(table.schema)[1:]:
-            if field.metadata and b"unit" in field.metadata:
-                units[field.name] = field.metadata[b"unit"].decode()
+        for column in list(table.schema)[1:]:
+            if column.metadata and b"unit" in column.metadata:
+                units[column.name] = column.metadata[b"unit"].decode()
         metadata = table.schema.metadata or {}
         info = json.loads(metadata.get(b"robofmu.info", b"{}"))
         return cls(table.column(0).to_numpy(), names[1:], data, info, units)

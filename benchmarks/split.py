@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import ctypes
 import sys
-import time
 
 import numpy as np
 
@@ -31,18 +30,7 @@ from robofmu.components.fmi.base import BlockSlave
 from robofmu.system import experiment
 from robofmu.system.fmu import Block
 from robofmu.system.master import Master, _Fmi2Functions
-
-H = 1e-3
-
-
-def best_per_step(step, steps: int, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(steps):
-            step()
-        best = min(best, (time.perf_counter() - start) / steps)
-    return best
+from run import H, best_of          # benchmarks/run.py, beside this file
 
 
 def ports(master: Master, name: str):
@@ -78,7 +66,7 @@ def main(argv=None) -> int:
         logic.configure()
         clock = [0]
 
-        def direct(logic=logic, slots=np.array(vin, dtype=np.intp), start=np.array(values), clock=clock):
+        def direct(k, logic=logic, slots=np.array(vin, dtype=np.intp), start=np.array(values), clock=clock):
             t = clock[0] * H
             logic.values[slots] = start
             logic.output(t)
@@ -92,7 +80,7 @@ def main(argv=None) -> int:
         slave.exit_initialization_mode()
         slave_clock = [0]
 
-        def in_process(slave=slave, clock=slave_clock):
+        def in_process(k, slave=slave, clock=slave_clock):
             if vin:
                 slave.set_real(vin, values)
             slave.get_real(vout)
@@ -112,7 +100,7 @@ def main(argv=None) -> int:
         c_bools = (ctypes.c_int * max(1, len(vbool)))()
         fmi_clock = [0]
 
-        def through_fmi(f=functions, c=functions.component, clock=fmi_clock):
+        def through_fmi(k, f=functions, c=functions.component, clock=fmi_clock):
             if vin:
                 f.set_real(c, c_in, len(vin), c_values)
             f.get_real(c, c_out, len(vout), c_read)
@@ -123,9 +111,9 @@ def main(argv=None) -> int:
             clock[0] += 1
 
         try:
-            t_logic = best_per_step(direct, args.steps, args.repeats)
-            t_slave = best_per_step(in_process, args.steps, args.repeats)
-            t_fmi = best_per_step(through_fmi, args.steps, args.repeats)
+            t_logic = best_of(direct, args.steps, args.repeats)
+            t_slave = best_of(in_process, args.steps, args.repeats)
+            t_fmi = best_of(through_fmi, args.steps, args.repeats)
         finally:
             fmu.close()
         rows.append((name, t_logic, t_slave - t_logic, t_fmi - t_slave, t_fmi, bool(vin) + bool(vout) + bool(vbool) + 1))

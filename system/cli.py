@@ -116,11 +116,8 @@ def _sweep(args) -> int:
     except SweepInterrupted as exc:
         _say("sweep", exc)
         return 130
-    except ConnectionError as exc:
-        _say("sweep", exc)
-        return 2
-    except ValueError as exc:          # UsageError, DesignError, ExperimentError, DiagramError
-        _say("sweep", exc)
+    except (ValueError, ConnectionError) as exc:    # UsageError, DesignError, ExperimentError, DiagramError;
+        _say("sweep", exc)                          # a scheduler that cannot be reached
         return 2
     failed = len(run.failed)
     print(f"{len(run.rows)} runs ({run.ran} now, {run.reused} reused), {failed} failed; wrote "

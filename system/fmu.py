@@ -104,14 +104,17 @@ class Block:
     echo : callable, optional
         Called with every :class:`LogMessage` as it arrives (default: none; all are kept in
         :attr:`messages`).
+    model_description : fmpy ModelDescription, optional
+        The FMU's, already read (the master passes its plan's); default: read from ``path``.
     """
 
-    def __init__(self, path: str | Path, name: str, echo: Callable[[LogMessage], None] | None = None):
+    def __init__(self, path: str | Path, name: str, echo: Callable[[LogMessage], None] | None = None,
+                 model_description=None):
         self.path = Path(path)
         self.name = name
         if not self.path.is_file():
             raise FileNotFoundError(f"{name}: FMU {self.path} does not exist (run `robofmu build`)")
-        self.md = read_model_description(str(self.path), validate=False)
+        self.md = model_description or read_model_description(str(self.path), validate=False)
         if self.md.coSimulation is None:
             raise ValueError(f"{name}: {self.path} is not a co-simulation FMU")
         self.variables = {v.name: v for v in self.md.modelVariables}

@@ -313,7 +313,7 @@ class Master:
         for name in self.order:
             node = self.nodes[name]
             try:
-                block = Block(node.path, name, echo=self.log)
+                block = Block(node.path, name, echo=self.log, model_description=node.model_description)
             except FMUError as exc:
                 raise SimulationError(str(exc), name, None, None) from None
             self.blocks[name] = block
@@ -331,7 +331,7 @@ class Master:
         outputs = [(name, variable) for name in self.order
                    for variable in self.nodes[name].model_description.modelVariables
                    if variable.causality == "output" and variable.type in ("Real", "Boolean")]
-        recorded = {k for k in select([f"{name}.{v.name}" for name, v in outputs], self.record)}
+        recorded = set(select([f"{name}.{v.name}" for name, v in outputs], self.record))
         wired = {(link.source, link.output) for link in self.links}
         read = [(name, v) for k, (name, v) in enumerate(outputs) if k in recorded or (name, v.name) in wired]
         real_outputs = [(name, v) for name, v in read if v.type == "Real"]           # evaluation order

@@ -22,9 +22,11 @@ COLORS = ["tab:red", "tab:green", "tab:blue", "k", "tab:orange", "tab:purple"]
 DIAGNOSTICS = ("iterations", "residual")
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig, path: Path, tight: bool = True) -> Path:
+    """Write ``fig`` as PNG (110 dpi; laid out tight unless ``tight`` is false) and close it."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
+    if tight:
+        fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -6,7 +6,7 @@ joint positions, ``q_ref``: joint reference, ``tau``: efforts, ``x_ref``: task r
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -48,8 +48,7 @@ class Roles:
 
     def signals(self) -> list[str]:
         """The vector bases of every role the experiment declares (what analysis reads)."""
-        return [getattr(self, role) for role in ("q", "qd", "q_ref", "tau", "x_ref", "x", "grip")
-                if getattr(self, role) is not None]
+        return [getattr(self, f.name) for f in fields(self) if f.name != "robot" and getattr(self, f.name) is not None]
 
     def require(self, *names: str) -> None:
         missing = [n for n in names if getattr(self, n) is None]

@@ -159,7 +159,7 @@ class Design:
     seed: int = 0
     stop_time: float | None = None
     step: float | None = None
-    runs_cache: list = field(default=None, repr=False, compare=False)
+    runs_cache: list = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         names = [a.name for a in self.axes]

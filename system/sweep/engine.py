@@ -46,16 +46,6 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, tim
     import dask
     from distributed import Client, LocalCluster
 
-    quiet = {"distributed.scheduler.allowed-failures": 1,          # a run whose worker dies: retried once
-             "distributed.worker.preload": [PRELOAD],
-             "distributed.worker.daemon": False,
-             # the workers' event loops wake less often: their thread takes the GIL from the run's
-             "distributed.worker.profile.enabled": False,
-             "distributed.admin.tick.interval": "500ms", "distributed.admin.tick.limit": "30s",
-             "distributed.admin.system-monitor.interval": "2s",
-             "distributed.admin.system-monitor.gil.enabled": False,
-             "distributed.worker.memory.monitor-interval": "1s",
-             "distributed.scheduler.work-stealing": False}          # equal runs: the queue balances them
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout=timeout)
@@ -66,7 +56,17 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, tim
         finally:
             client.close()
         return
-    with dask.config.set(quiet):
+    local = {"distributed.scheduler.allowed-failures": 1,          # a run whose worker dies: retried once
+             "distributed.worker.preload": [PRELOAD],
+             "distributed.worker.daemon": False,
+             # the workers' event loops wake less often: their thread takes the GIL from the run's
+             "distributed.worker.profile.enabled": False,
+             "distributed.admin.tick.interval": "500ms", "distributed.admin.tick.limit": "30s",
+             "distributed.admin.system-monitor.interval": "2s",
+             "distributed.admin.system-monitor.gil.enabled": False,
+             "distributed.worker.memory.monitor-interval": "1s",
+             "distributed.scheduler.work-stealing": False}          # equal runs: the queue balances them
+    with dask.config.set(local):
         cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=logging.ERROR)
     client = Client(cluster)
@@ -80,9 +80,9 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, tim
 class SweepProgress:
     """One updating line: runs done and failed of the total, and the estimated time left."""
 
-    def __init__(self, label: str, total: int, skipped: int = 0, stream=sys.stderr):
+    def __init__(self, label: str, total: int, skipped: int = 0, skipped_failed: int = 0, stream=sys.stderr):
         self.label, self.total, self.skipped, self.stream = label, total, skipped, stream
-        self.done = self.failed = 0
+        self.done, self.failed = skipped, skipped_failed       # rows an earlier invocation finished
         self.start = time.perf_counter()
         self.tty = stream.isatty()
         self.shown = -1.0

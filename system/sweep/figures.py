@@ -31,8 +31,8 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator  # noqa: E402
 
+from ..plots import _save  # noqa: E402
 from ..units import printed, small  # noqa: E402
-from .design import STEP  # noqa: E402
 from .run import SweepRun  # noqa: E402
 
 __all__ = ["HEADLINE", "column", "comparison_heatmaps", "heatmap", "histograms", "metric_vs_parameter",
@@ -104,7 +104,7 @@ def _metric_label(run: SweepRun, metric: str) -> str:
 
 
 def _axis_label(run: SweepRun, name: str) -> str:
-    unit = run.units.get(name) or ("s" if name == STEP else None)
+    unit = run.units.get(name)
     return f"{name} ({printed(unit)})" if unit else name
 
 
@@ -202,15 +202,6 @@ def _failed_marks(ax, x: np.ndarray, label: str | None = "failed run") -> None:
     if len(x):
         ax.plot(x, np.zeros(len(x)), "x", color="tab:red", ms=8, mew=2, clip_on=False, zorder=5,
                 transform=ax.get_xaxis_transform(), label=label)
-
-
-def _save(fig, path: Path, tight: bool = True) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if tight:
-        fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 # ---------------------------------------------------------------------------------------------

@@ -21,7 +21,10 @@ from ..analysis import Tracking, settling_time
 from ..result import Result
 from ..roles import Roles
 
-__all__ = ["metric_names", "metrics_of"]
+__all__ = ["METRIC_UNITS", "metric_names", "metrics_of"]
+
+#: The metrics whose unit is the same for every robot (the joint ones are rad or m per joint).
+METRIC_UNITS = {"max_tcp_error": "m", "settling_time": "s"}
 
 
 def metric_names(roles: Roles, joints: int) -> list[str]:

@@ -63,7 +63,7 @@ def _metric_cell(run: SweepRun, row: dict, name: str) -> str:
 
 
 def _header(run: SweepRun, name: str, metric: bool = False) -> str:
-    unit = shown(run, name)[1] if metric else printed(run.units.get(name) or ("s" if name == STEP else None))
+    unit = shown(run, name)[1] if metric else printed(run.units.get(name))
     return f"{name} ({unit})" if unit else name
 
 
@@ -110,7 +110,7 @@ def _design_section(run: SweepRun) -> list[str]:
     design = run.design
     lines = ["## What was varied", "", f"Experiment `{design.experiment}`, {len(design.runs())} runs:", ""]
     for axis in design.axes:
-        unit = printed(run.units.get(axis.name) or ("s" if axis.name == STEP else None))
+        unit = printed(run.units.get(axis.name))
         lines.append(f"- `{axis.describe()}`" + (f" ({unit})" if unit else ""))
     lines.append("")
     grid = design.grid_axes
@@ -160,7 +160,7 @@ def _ranges(run: SweepRun, rows: list[dict]) -> list[str]:
     lines = []
     for axis in run.design.axes:
         texts = [r[axis.name] for r in rows]
-        unit = printed(run.units.get(axis.name) or ("s" if axis.name == STEP else None))
+        unit = printed(run.units.get(axis.name))
         if set(texts) <= {"true", "false"}:
             shown_values = ", ".join(sorted(set(texts)))
         else:

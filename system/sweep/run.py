@@ -23,13 +23,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import experiment
+from ..check import variable_unit
 from ..diagram import coerce, expand
 from ..master import DiagramError, Master
 from ..runner import UsageError, check_fmu_folder, check_roles, check_times, check_writable, timing
 from .design import STEP, Design
 from .engine import SweepProgress, cluster_client, default_workers, execute
 from .journal import Journal, key_of
-from .metrics import metric_names
+from .metrics import METRIC_UNITS, metric_names
 
 __all__ = ["SweepInterrupted", "SweepRun", "run_sweep"]
 
@@ -116,13 +117,6 @@ def _folder(out: Path, design: Design) -> bool:
     return True
 
 
-def _typed(kind: str, value, what: str):
-    """A sweep value as the FMU variable's type (a whole float for an Integer)."""
-    if kind in ("Integer", "Enumeration") and isinstance(value, float) and value.is_integer():
-        value = int(value)
-    return coerce(kind, value, what)
-
-
 def check(design: Design, fmu_dir):
     """The experiment's System (FMU paths absolute), checked against the design; its Roles,
     metric columns, units and the design's runs with typed values."""
@@ -150,34 +144,23 @@ def check(design: Design, fmu_dir):
     except DiagramError as exc:
         raise DiagramError(f"{system.source or system.name} with --vary", exc.problems) from None
     roles = check_roles(system, master)
-    units = {}
-    kinds = {}
+    units, kinds = {STEP: "s"}, {}
     for axis in design.axes:
         if axis.name == STEP:
-            units[STEP] = "s"
             continue
         node = master.nodes[axis.block]
         variables = [node.variables[v] for v in expand(node.variables, axis.parameter)]
         if any(v.causality != "parameter" for v in variables):
             raise UsageError(f"--vary {axis.name}: {axis.parameter!r} of {axis.block} is not a parameter")
         kinds[axis.name] = variables[0].type
-        unit = getattr(variables[0], "unit", None) or getattr(getattr(variables[0], "declaredType", None), "unit", None)
-        if unit:
-            units[axis.name] = unit
-        for value in axis.values:
-            try:
-                _typed(kinds[axis.name], value, f"--vary {axis.name}")
-            except ValueError as exc:
-                raise UsageError(str(exc)) from None
-    typed = [{k: (v if k == STEP else _typed(kinds[k], v, k)) for k, v in run.items()} for run in runs]
-    model = roles.model()
-    metrics = metric_names(roles, model.n)
-    for name in metrics:
-        base = name.split("[")[0]
-        if base in ("max_tcp_error",):
-            units[name] = "m"
-        elif base == "settling_time":
-            units[name] = "s"
+        if variable_unit(variables[0]):
+            units[axis.name] = variable_unit(variables[0])
+    try:
+        typed = [{k: (v if k == STEP else coerce(kinds[k], v, f"--vary {k}")) for k, v in run.items()} for run in runs]
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    metrics = metric_names(roles, roles.model().n)
+    units.update({name: unit for name, unit in METRIC_UNITS.items() if name in metrics})
     return system, roles, metrics, units, typed
 
 
@@ -246,10 +229,8 @@ def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = "fmus", wor
             keep = (out / "runs").resolve()
             keep.mkdir(exist_ok=True)
         count = None if scheduler else min(workers or default_workers(), max(1, len(pending)))
-        meter = SweepProgress(system.name, len(runs), reused) if progress else None
-        if meter:
-            meter.done = reused
-            meter.failed = sum(journal.rows[k]["status"] != "ok" for k in keys if k in journal.rows)
+        reused_failed = sum(journal.rows[k]["status"] != "ok" for k in keys if k in journal.rows)
+        meter = SweepProgress(system.name, len(runs), reused, reused_failed) if progress else None
         start = time.perf_counter()
 
         def arrived(index, record):

@@ -7,7 +7,7 @@ FMU_SOURCES := $(shell find components -name '*.py' -o -name '*.urdf' -o -name '
                $(wildcard system/fmi_export/*.py system/fmi_export/*.c)
 FMU_STAMP := fmus/.built
 
-.PHONY: venv fmus test demo bench soak clean
+.PHONY: venv fmus test demo bench bench-peers soak clean
 
 venv: $(STAMP)
 
@@ -35,6 +35,21 @@ bench: $(FMU_STAMP)
 	$(PY) benchmarks/loop.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/sweep.py
+
+# robofmu beside the C++ floor, pydrake and bdsim + Robotics Toolbox on the same loop; each peer
+# gets its own environment under benchmarks/peers/ (not project dependencies; a few minutes once)
+PEERS := benchmarks/peers
+PEER_STAMPS := $(PEERS)/.venv-drake/.installed $(PEERS)/.venv-bdsim/.installed
+
+$(PEERS)/.venv-%/.installed: $(PEERS)/%-requirements.txt
+	rm -rf $(PEERS)/.venv-$*
+	$(PYTHON) -m venv $(PEERS)/.venv-$*
+	$(PEERS)/.venv-$*/bin/pip install --quiet --upgrade pip
+	$(PEERS)/.venv-$*/bin/pip install --quiet -r $<
+	touch $@
+
+bench-peers: $(FMU_STAMP) $(PEER_STAMPS)
+	$(PY) benchmarks/peers.py
 
 # not part of `make test`: 10^6 steps of chess-pd through the master in one process (a few
 # minutes); fails if resident memory grows by 5 MB or more after the first tenth

@@ -35,13 +35,31 @@ class ComputedTorque:
         self.robot = robot
         self.kp, self.kd, self.ki = float(kp), float(kd), float(ki)
         self.z = np.zeros(robot.n)
+        self._error, self._command = np.zeros(robot.n), np.zeros(robot.n)
 
     def torque(self, q_ref, qd_ref, qdd_ref, q, qd) -> np.ndarray:
         """Joint torques/forces (N.m or N), shape (n,), at the current instant."""
-        u = (np.asarray(qdd_ref) + self.kd * (np.asarray(qd_ref) - qd)
-             + self.kp * (np.asarray(q_ref) - q) + self.ki * self.z)
-        return self.robot.inverse_dynamics(q, qd, u)        # M(q) u + N(q, qd) in one pass (RNEA)
+        out = np.empty(self.robot.n)
+        self.torque_into(np.asarray(q_ref, float), np.asarray(qd_ref, float), np.asarray(qdd_ref, float),
+                         np.asarray(q, float), np.asarray(qd, float), out)
+        return out
+
+    def torque_into(self, q_ref, qd_ref, qdd_ref, q, qd, out: np.ndarray) -> None:
+        """:meth:`torque` of arrays of shape (n,), written into ``out`` (no allocation)."""
+        e, u = self._error, self._command
+        np.subtract(qd_ref, qd, out=e)               # u = ((qdd_ref + kd e') + kp e) + ki z
+        np.multiply(e, self.kd, out=e)
+        np.add(qdd_ref, e, out=u)
+        np.subtract(q_ref, q, out=e)
+        np.multiply(e, self.kp, out=e)
+        np.add(u, e, out=u)
+        np.multiply(self.z, self.ki, out=e)
+        np.add(u, e, out=u)
+        self.robot.inverse_dynamics_into(q, qd, u, out)    # M(q) u + N(q, qd) in one pass (RNEA)
 
     def advance(self, q_ref, q, h: float) -> None:
         """Integrate the error over a step of ``h`` seconds (error held at its current value)."""
-        self.z += (np.asarray(q_ref) - q) * h
+        e = self._error
+        np.subtract(q_ref, q, out=e)
+        np.multiply(e, h, out=e)
+        np.add(self.z, e, out=self.z)

@@ -1,9 +1,10 @@
 """The manipulator plant: M(q) qdd + C(q, qd) qd + g(q) = tau, integrated with tau held."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .integrators import rk4
 from .robots.model import RobotModel
 
 
@@ -39,6 +40,12 @@ class Plant:
         if self.x.shape != (2 * self.n,) or not np.all(np.isfinite(self.x)):
             raise ValueError(f"q0/qd0: need {self.n} finite values each")
         self.grip = False
+        size = 2 * self.n
+        self._stages = np.zeros((4, size))          # RK4's k1 .. k4
+        self._work, self._stage, self._total = np.zeros(size), np.zeros(size), np.zeros(size)
+        self._ones = np.ones(size)
+        n = self.n                                  # (q, qd) views of the work state, the stage, total, k1 .. k4
+        self._halves = [(b[:n], b[n:]) for b in (self._work, self._stage, self._total, *self._stages)]
 
     @property
     def q(self) -> np.ndarray:
@@ -69,23 +76,59 @@ class Plant:
         """Advance the state by ``h`` seconds with ``tau`` (and the end-effector wrench ``f_ext``,
         where the model takes one) held; returns the new state (q, qd).
 
+        Classical RK4 in ceil(h / max_substep) equal sub-steps, the arithmetic of
+        :func:`~robofmu.components.integrators.rk4` element for element, in buffers of the plant's
+        own (no allocation per step beyond the model's results).
+
         Raises PlantDiverged naming the joint and the time if the state turns non-finite; the
         state is then left as it was before the step.
         """
-        n = self.n
+        substeps = max(1, math.ceil(h / self.max_substep - 1e-9))
+        dt = h / substeps
+        half, sixth = 0.5 * dt, dt / 6.0
+        k1, k2, k3, k4 = self._stages
+        x, stage, total = self._work, self._stage, self._total
+        at_x, at_stage = self._halves[0], self._halves[1]
+        d1, d2, d3, d4 = self._halves[3:]
+        derivative = self._derivative
+        x[:] = self.x
+        for _ in range(substeps):
+            derivative(at_x, tau, f_ext, d1)
+            np.multiply(k1, half, out=stage)
+            np.add(x, stage, out=stage)
+            derivative(at_stage, tau, f_ext, d2)
+            np.multiply(k2, half, out=stage)
+            np.add(x, stage, out=stage)
+            derivative(at_stage, tau, f_ext, d3)
+            np.multiply(k3, dt, out=stage)
+            np.add(x, stage, out=stage)
+            derivative(at_stage, tau, f_ext, d4)
+            np.multiply(k2, 2.0, out=total)          # (dt/6) (k1 + 2 k2 + 2 k3 + k4), left to right
+            np.add(k1, total, out=total)
+            np.multiply(k3, 2.0, out=stage)
+            np.add(total, stage, out=total)
+            np.add(total, k4, out=total)
+            np.multiply(total, sixth, out=total)
+            np.add(x, total, out=x)
+        if not math.isfinite(x.dot(self._ones)):      # nan and inf propagate through the sum
+            bad = np.flatnonzero(~np.isfinite(x))
+            if bad.size:
+                n = self.n
+                j = bad[0] % n + 1
+                what = "q" if bad[0] < n else "qd"
+                raise PlantDiverged(
+                    f"state {what}[{j}] became non-finite during the step from t = {t:.9g} s "
+                    f"to {t + h:.9g} s (joint {j}); last finite state q = {self.q.tolist()}, "
+                    f"qd = {self.qd.tolist()}")
+        self.x[:] = x
+        return self.x
 
-        def f(x):
-            return np.concatenate([x[n:], self.acceleration(x, tau, f_ext)])
-
-        with np.errstate(all="ignore"):
-            x = rk4(f, self.x, h, self.max_substep)
-        bad = np.flatnonzero(~np.isfinite(x))
-        if bad.size:
-            j = bad[0] % n + 1
-            what = "q" if bad[0] < n else "qd"
-            raise PlantDiverged(
-                f"state {what}[{j}] became non-finite during the step from t = {t:.9g} s "
-                f"to {t + h:.9g} s (joint {j}); last finite state q = {self.q.tolist()}, "
-                f"qd = {self.qd.tolist()}")
-        self.x = x
-        return x
+    def _derivative(self, at, tau: np.ndarray, f_ext, out) -> None:
+        """out = (qd, qdd) at the state ``at`` = (q, qd); ``at`` and ``out`` as (q, qd) views."""
+        q, qd = at
+        out_q, out_qd = out
+        out_q[:] = qd
+        if f_ext is None:
+            self.robot.forward_dynamics_into(q, qd, tau, out_qd)
+        else:
+            out_qd[:] = self.robot.forward_dynamics(q, qd, tau, f_ext)

@@ -14,6 +14,7 @@ common default V = 1.5 dx/T: tb = T/3 and a = 4.5 dx/T^2.
 """
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,14 +52,54 @@ def lspb(x0: np.ndarray, x1: np.ndarray, T: float, t: float, cruise_factor: floa
     return x0 + dx - 0.5 * a * r * r, a * r, -a
 
 
+class _LSPBPiece:
+    """One LSPB move with its constants computed once: :func:`lspb`'s arithmetic, written into
+    given arrays."""
+
+    def __init__(self, x0, x1, T: float, cruise_factor: float):
+        self.x0 = np.asarray(x0, dtype=float)
+        dx = np.asarray(x1, dtype=float) - self.x0
+        self.T = T
+        self.V = cruise_factor * dx / T
+        self.tb = T - T / cruise_factor
+        self.a = self.V / self.tb
+        self.half_a = 0.5 * self.a
+        self.minus_a = -self.a
+        self.cruise_start = self.x0 + self.half_a * self.tb * self.tb
+        self.end = self.x0 + dx
+
+    def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray) -> None:
+        T, tb = self.T, self.tb
+        t = min(max(t, 0.0), T)
+        if t < tb:
+            np.multiply(self.half_a, t, out=x)
+            np.multiply(x, t, out=x)
+            np.add(self.x0, x, out=x)
+            np.multiply(self.a, t, out=xd)
+            xdd[:] = self.a
+        elif t <= T - tb:
+            np.multiply(self.V, t - tb, out=x)
+            np.add(self.cruise_start, x, out=x)
+            xd[:] = self.V
+            xdd[:] = 0.0
+        else:
+            r = T - t
+            np.multiply(self.half_a, r, out=x)
+            np.multiply(x, r, out=x)
+            np.subtract(self.end, x, out=x)
+            np.multiply(self.a, r, out=xd)
+            xdd[:] = self.minus_a
+
+
 #: Communication points within this many seconds of a breakpoint are evaluated at it.
 SNAP_TOLERANCE = 1e-9
 
 
-def snap_to(breakpoints: np.ndarray, t: float, tol: float = SNAP_TOLERANCE) -> float:
+def snap_to(breakpoints, t: float, tol: float = SNAP_TOLERANCE) -> float:
     """``t`` moved onto a breakpoint within ``tol`` s, so that communication points that land on
-    one by rounding (3.4995 + 5e-4) evaluate the same branch as the exact instant."""
-    k = int(np.searchsorted(breakpoints, t))
+    one by rounding (3.4995 + 5e-4) evaluate the same branch as the exact instant.
+    ``breakpoints``: sorted (an array, or a list, which is faster to search)."""
+    k = bisect_left(breakpoints, t)
     for j in (k - 1, k):
         if 0 <= j < len(breakpoints) and abs(breakpoints[j] - t) <= tol:
             return float(breakpoints[j])
@@ -165,9 +206,14 @@ class WaypointTrajectory:
         self.breakpoints = np.unique(np.concatenate(
             [self._starts, [self.duration], [s.start + b for s, b in zip(moves, blends)],
              [s.end - b for s, b in zip(moves, blends)]]))
+        self._break_list = self.breakpoints.tolist()      # searched by bisect at every evaluation
+        self._start_list = self._starts.tolist()
+        self._pieces = [_LSPBPiece(s.x0, s.x1, s.end - s.start, self.cruise_factor) if s.move else None
+                        for s in segments]
 
-    def _snap(self, t: float) -> float:
-        return snap_to(self.breakpoints, t)
+    def snap(self, t: float) -> float:
+        """``t`` moved onto a breakpoint within 1e-9 s (see :func:`snap_to`)."""
+        return snap_to(self._break_list, t)
 
     def evaluate(self, t: float, snap: bool = True):
         """Reference position, velocity and acceleration at time ``t`` (s), each shape (m,).
@@ -176,20 +222,31 @@ class WaypointTrajectory:
         ``snap``, times within 1e-9 s of a breakpoint are evaluated at the breakpoint (sampled
         use); without, the exact branch at ``t`` (an integrator working inside one piece).
         """
-        if snap:
-            t = self._snap(t)
-        if t >= self.duration:
-            return self.waypoints[-1].copy(), np.zeros(self.dim), np.zeros(self.dim)
-        i = max(int(np.searchsorted(self._starts, t, side="right")) - 1, 0)
-        s = self.segments[i]
-        if s.move == 0:
-            return s.x0.copy(), np.zeros(self.dim), np.zeros(self.dim)
-        return lspb(s.x0, s.x1, s.end - s.start, t - s.start, self.cruise_factor)
+        x, xd, xdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
+        self.evaluate_into(t, x, xd, xdd, snap)
+        return x, xd, xdd
 
-    def grip(self, t: float) -> bool:
+    def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
+                      snap: bool = True) -> None:
+        """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (each shape (m,); no allocation)."""
+        if snap:
+            t = snap_to(self._break_list, t)
+        if t >= self.duration:
+            x[:], xd[:], xdd[:] = self.waypoints[-1], 0.0, 0.0
+            return
+        i = max(bisect_right(self._start_list, t) - 1, 0)
+        piece = self._pieces[i]
+        if piece is None:
+            x[:], xd[:], xdd[:] = self.segments[i].x0, 0.0, 0.0
+            return
+        piece.evaluate_into(t - self._start_list[i], x, xd, xdd)
+
+    def grip(self, t: float, snap: bool = True) -> bool:
         """Gripper closed at time ``t``? Closing and opening take effect at their instants
-        (within 1e-9 s, so that communication points that land on them by rounding count)."""
-        t = self._snap(t)
+        (within 1e-9 s, so that communication points that land on them by rounding count;
+        ``snap=False``: ``t`` is snapped already)."""
+        if snap:
+            t = snap_to(self._break_list, t)
         closed = t >= self.grip_close_time
         opened = t >= self.grip_open_time and self.grip_open_time > self.grip_close_time
         return bool(closed and not opened)

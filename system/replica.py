@@ -60,15 +60,29 @@ def block_identity(path: str | Path) -> dict[str, str]:
 
 @dataclass
 class _Wire:
-    """Copies of one destination block's inputs from one source block (index arrays)."""
+    """Copies of one destination block's inputs from one source block (index arrays; a slice
+    copy where both sides are consecutive slots, as wired vectors are)."""
 
     source: Block
     source_slots: np.ndarray
     target: Block
     target_slots: np.ndarray
 
+    def __post_init__(self):
+        self._views = None
+        if _consecutive(self.source_slots) and _consecutive(self.target_slots):
+            self._views = (self.source.values[self.source_slots[0]:self.source_slots[-1] + 1],
+                           self.target.values[self.target_slots[0]:self.target_slots[-1] + 1])
+
     def apply(self) -> None:
-        self.target.values[self.target_slots] = self.source.values[self.source_slots]
+        if self._views is not None:
+            self._views[1][:] = self._views[0]
+        else:
+            self.target.values[self.target_slots] = self.source.values[self.source_slots]
+
+
+def _consecutive(slots: np.ndarray) -> bool:
+    return len(slots) > 0 and bool(np.all(np.diff(slots) == 1))
 
 
 class InProcessDiagram:
@@ -162,7 +176,7 @@ class InProcessDiagram:
     def _row(self, out: np.ndarray) -> None:
         k = 0
         for block, slots, count in self._record:
-            out[k:k + count] = block.values[slots]
+            block.values.take(slots, out=out[k:k + count])
             k += count
 
     # -- sampled (the master's loop) -------------------------------------------------------------------

@@ -56,16 +56,19 @@ class ControllerBlock(Block):
         scale = self.parameter("gain_scale")
         self.law = ComputedTorque(self.robot, scale * self.parameter("kp"), scale * self.parameter("kd"),
                                   scale * self.parameter("ki"))
+        v = self.values                          # views, made once (the values array is never replaced)
+        self._inputs = tuple(v[s] for s in (self.q_ref, self.qd_ref, self.qdd_ref, self.q, self.qd))
+        self._tau_out = v[self.tau]
         super().configure()
 
     def output(self, t):
-        v = self.values
         if self.has_payload:
-            self.robot.set_payload(self.payload_mass if v[self.grip] else 0.0)
-        v[self.tau] = self.law.torque(v[self.q_ref], v[self.qd_ref], v[self.qdd_ref], v[self.q], v[self.qd])
+            self.robot.set_payload(self.payload_mass if self.values[self.grip] else 0.0)
+        self.law.torque_into(*self._inputs, self._tau_out)
 
     def advance(self, t, h):
-        self.law.advance(self.values[self.q_ref], self.values[self.q], h)
+        q_ref, _, _, q, _ = self._inputs
+        self.law.advance(q_ref, q, h)
 
     def internal_state(self):
         return {"z": None if self.law is None else [float(x) for x in self.law.z]}

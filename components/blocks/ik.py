@@ -84,6 +84,9 @@ class IKBlock(Block):
         self.last = None
         self.committed = None
         self.outside = False
+        v = self.values                          # views, made once (the values array is never replaced)
+        self._targets = (v[self.x], v[self.xd], v[self.xdd])
+        self._ratio = np.zeros(self.robot.n)
         super().configure()
 
     def output(self, t):
@@ -91,13 +94,13 @@ class IKBlock(Block):
         self.solver.start_from(self.committed)
         try:
             try:
-                q, qd, qdd = self.solver.solve(v[self.x], v[self.xd], v[self.xdd])
+                q, qd, qdd = self.solver.solve(*self._targets)
             finally:
                 for name, k in self.diagnostics:
                     v[k] = self.solver.report[name]
-            ratio = np.abs(qd) / self.qd_limit
-            fastest = int(np.argmax(ratio))
-            if ratio[fastest] > 1.0:
+            ratio = np.divide(np.abs(qd, out=self._ratio), self.qd_limit, out=self._ratio)
+            if ratio.max() > 1.0:
+                fastest = int(np.argmax(ratio))
                 raise Unreachable(f"too close to a singularity: joint rate qd_ref[{fastest + 1}] = "
                                   f"{qd[fastest]:.6g} exceeds qd_limit[{fastest + 1}] = "
                                   f"{self.qd_limit[fastest]:g} at q = {np.round(q, 6).tolist()}")

@@ -75,6 +75,11 @@ class PlantBlock(Block):
                            payload_mass=self.parameter("payload_mass") if self.has_payload else 0.0,
                            max_substep=max_substep)
         self._grip()
+        v = self.values                          # views, made once (the values array is never replaced)
+        self._tau_in = v[self.tau]
+        self._wrench_in = v[self.f_ext] if self.has_wrench else None
+        contiguous = self.q.stop == self.qd.start
+        self._state_out = v[self.q.start:self.qd.stop] if contiguous else None
         super().configure()
 
     def _grip(self):
@@ -87,7 +92,10 @@ class PlantBlock(Block):
         return self.values[self.f_ext] if self.has_wrench else None
 
     def output(self, t):
-        self.values[self.q], self.values[self.qd] = self.plant.q, self.plant.qd
+        if self._state_out is not None:
+            self._state_out[:] = self.plant.x
+        else:
+            self.values[self.q], self.values[self.qd] = self.plant.q, self.plant.qd
         if self.has_wrench:
             self.values[self.x] = self.robot.fk(self.plant.q)
 
@@ -98,7 +106,7 @@ class PlantBlock(Block):
                               f"{self.plant.max_substep:g} s (at most {MAX_SUBSTEPS}); step refused")
         self._grip()
         try:
-            self.plant.step(self.values[self.tau], h, t, self._wrench())
+            self.plant.step(self._tau_in, h, t, self._wrench_in)
         except PlantDiverged as exc:
             raise StepRefused(str(exc)) from None
 

@@ -56,9 +56,14 @@ class _Reference(Block):
                 if not np.all(np.isfinite(value)):
                     raise ValueError(f"the parameters give a non-finite reference {what} at t = {t:g} s "
                                      f"({np.asarray(value).tolist()})")
+        self._views = tuple(self.values[s] for s in self.outputs)   # made once: values is never replaced
+        self._into = getattr(self.profile, "evaluate_into", None)
         super().configure()
 
     def output(self, t):
+        if self._into is not None:
+            self._into(t, *self._views, self.snap)
+            return
         p, v, a = self.outputs
         self.values[p], self.values[v], self.values[a] = self.profile.evaluate(t, self.snap)
 
@@ -128,9 +133,12 @@ class WaypointsBlock(_Reference):
         super().configure()
 
     def output(self, t):
-        super().output(t)
-        if self.has_grip:
-            self.values[self.grip] = self.profile.grip(t)
+        if not self.has_grip:
+            self.profile.evaluate_into(t, *self._views, self.snap)
+            return
+        snapped = self.profile.snap(t)        # the grip always snaps; snapped once for both
+        self.values[self.grip] = self.profile.grip(snapped, snap=False)
+        self.profile.evaluate_into(snapped if self.snap else t, *self._views, False)
 
     def events(self):
         found = {"grip closes": self.profile.grip_close_time, "grip opens": self.profile.grip_open_time}

@@ -14,7 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+import math
+
 import numpy as np
+from scipy.linalg.lapack import dgetrf as getrf, dgetrs as getrs
 
 from ..parameters import Parameter, ParameterError, resolve
 from ..robots.model import RobotModel
@@ -82,6 +85,10 @@ class IKSolver:
             raise ValueError(f"IK solver {self.kind!r}: {robot.m} task coordinates and "
                              f"{len(self.constraint_rows)} constraints for {robot.n} joints")
         self._padding = np.zeros(len(self.constraint_rows))
+        n, m = robot.n, robot.m
+        self._A = np.zeros((n, n))                 # A = [J; C]: the constraint rows set once
+        self._A[m:] = self.constraint_rows
+        self._rhs = np.zeros(n)                    # [xd; 0], then [xdd - Jdot qd; 0]
 
     def setup(self) -> None:
         """Read the parameters (``self.values``) and robot geometry; set ``constraint_rows``."""
@@ -106,14 +113,18 @@ class IKSolver:
         Unreachable
             If A(q) is singular (or the rates are not finite).
         """
-        A = self.augmented_jacobian(q)
-        try:
-            qd = np.linalg.solve(A, np.concatenate([xd, self._padding]))
-            qdd = np.linalg.solve(A, np.concatenate(
-                [np.asarray(xdd) - self.robot.jdot_qdot(q, qd), self._padding]))
-        except np.linalg.LinAlgError:
-            raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}") from None
-        if not np.isfinite(qd.sum() + qdd.sum()):
+        A, rhs, m = self._A, self._rhs, self.robot.m
+        A[:m] = self.robot.jacobian(q)
+        # One LU factorization (LAPACK getrf, as numpy.linalg.solve does) for both right-hand
+        # sides, called directly: numpy.linalg.solve costs several times the arithmetic of a 4 x 4.
+        lu, pivots, singular = getrf(A)
+        if singular:
+            raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
+        rhs[:m] = xd
+        qd = getrs(lu, pivots, rhs)[0]
+        np.subtract(xdd, self.robot.jdot_qdot(q, qd), out=rhs[:m])
+        qdd = getrs(lu, pivots, rhs)[0]
+        if not math.isfinite(qd.sum() + qdd.sum()):
             raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
         return qd, qdd
 
@@ -135,7 +146,7 @@ class IKSolver:
         Unreachable
         """
         q = self.position(np.asarray(x, dtype=float))
-        qd, qdd = self.rates(q, np.asarray(xd, dtype=float), xdd)
+        qd, qdd = self.rates(q, xd, xdd)
         return q, qd, qdd
 
 

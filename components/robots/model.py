@@ -118,9 +118,17 @@ class RobotModel(ABC):
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """qdd = M^-1 (tau - N), shape (n,)."""
 
+    def forward_dynamics_into(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, out: np.ndarray) -> None:
+        """:meth:`forward_dynamics` written into ``out`` (n,) (a model may spare the copy of its result)."""
+        out[:] = self.forward_dynamics(q, qd, tau)
+
     @abstractmethod
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """tau = M qdd + N, shape (n,)."""
+
+    def inverse_dynamics_into(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, out: np.ndarray) -> None:
+        """:meth:`inverse_dynamics` written into ``out`` (n,) (a model may spare the copy of its result)."""
+        out[:] = self.inverse_dynamics(q, qd, qdd)
 
     @abstractmethod
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:

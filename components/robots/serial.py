@@ -40,6 +40,9 @@ class SerialRobot(RobotModel):
         self.task_id = self._frame(description.task.frame, "task.frame")
         self._axes = np.array(description.task.axes)
         self.m = len(self._axes)
+        first = int(self._axes[0])               # the Jacobian's task rows: a slice where consecutive
+        consecutive = list(self._axes) == list(range(first, first + self.m))
+        self._rows = slice(first, first + self.m) if consecutive else self._axes
         self._direction = np.array(description.gravity_direction)
         self.set_gravity(description.gravity if gravity is None else gravity)
         self.payload = 0.0
@@ -94,7 +97,7 @@ class SerialRobot(RobotModel):
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         return pin.computeFrameJacobian(self.model, self.data, q, self.task_id,
-                                        pin.LOCAL_WORLD_ALIGNED)[self._axes]
+                                        pin.LOCAL_WORLD_ALIGNED)[self._rows]
 
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q, qd, self._zero)
@@ -120,6 +123,12 @@ class SerialRobot(RobotModel):
 
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         return pin.rnea(self.model, self.data, q, qd, qdd).copy()
+
+    def forward_dynamics_into(self, q, qd, tau, out) -> None:
+        out[:] = pin.aba(self.model, self.data, q, qd, tau)
+
+    def inverse_dynamics_into(self, q, qd, qdd, out) -> None:
+        out[:] = pin.rnea(self.model, self.data, q, qd, qdd)
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         return float(pin.computeKineticEnergy(self.model, self.data, q, qd))

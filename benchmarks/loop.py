@@ -11,7 +11,10 @@ Runners (each in a fresh child process, one after the other):
   preallocated array: it reproduces the master exactly (the correctness lines print the difference);
 - ``libcosim``: :func:`robofmu.system.ssp.run_ssp_libcosim` on ``export_ssp(system)``
   (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
-  observer, Booleans cannot be).
+  observer, Booleans cannot be);
+- ``C++ floor``: the same loop on Pinocchio's C++ API (``benchmarks/floor.py``: compiled here
+  where a compiler and the headers are found, else skipped with a note), the physical limit
+  the Python runners are measured against.
 
 Columns: ``wall`` is the whole call (loading and initializing the FMUs included; for libcosim
 also unpacking the SSP), ``per step`` the stepping loop alone divided by the number of steps
@@ -92,6 +95,10 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
             "peak_mb": peak, "imports_mb": imports_mb}
 
 
+def _cell(value: float, width: int, spec: str) -> str:
+    return f"{'—':>{width}}" if value != value else f"{value:>{width}{spec}}"
+
+
 def run_child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, ssp: Path, out: Path) -> dict:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--experiment", experiment, "--child", runner, "--h", repr(h),
            "--stop", repr(stop), "--fmus", str(fmu_root), "--ssp", str(ssp), "--out", str(out)]
@@ -149,6 +156,15 @@ def main(argv=None) -> int:
     experiment = args.experiment
     stop = system.stop_time if args.stop is None else args.stop
     rows, checks = [], []
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    try:
+        import floor
+        from loop_spec import spec as loop_spec
+
+        spec = loop_spec(experiment, fmu_root)
+        floor_note = None
+    except ValueError as exc:             # an experiment the C++ floor does not implement
+        floor_note = f"C++ floor skipped: {exc}"
     with tempfile.TemporaryDirectory(prefix="robofmu-bench-") as tmp:
         tmp = Path(tmp)
         ssp = export_ssp(system, tmp / f"{experiment}.ssp")
@@ -162,11 +178,28 @@ def main(argv=None) -> int:
                 best["wall"] = min(r["wall"] for r in tries)
                 best["peak_mb"] = max(r["peak_mb"] for r in tries)
                 got[runner] = {**best, "npz": out}
+            floor_per = None
+            if floor_note is None:
+                numbers = {**spec, "h": h, "n_steps": int(round(stop / h)), "stop": stop}
+                out = tmp / f"floor-{h}.npz"
+                tries = [floor.run_floor(numbers, out) for _ in range(args.repeat)]
+                if isinstance(tries[0], str):           # no compiler or no headers here
+                    floor_note = tries[0]
+                else:
+                    best = min(tries, key=lambda r: r["loop"])
+                    floor_per = best["loop"] / best["n_steps"]
+                    d, c = max_diff(out, got["robofmu"]["npz"], "plant.q[")
+                    checks.append(f"h = {h * 1e3:g} ms: C++ floor vs robofmu master: max |q diff| = {d:.3g} "
+                                  f"(rad or m; {c})")
             base = got["in-process"]["loop"] / got["in-process"]["n_steps"]
             for runner in RUNNERS:
                 r = got[runner]
                 per = r["loop"] / r["n_steps"]
-                rows.append((runner, h, r["wall"], per * 1e6, per / base, r["peak_mb"], r["imports_mb"]))
+                rows.append((runner, h, r["wall"], per * 1e6, per / base,
+                             per / floor_per if floor_per else float("nan"), r["peak_mb"], r["imports_mb"]))
+            if floor_per:
+                rows.append(("C++ floor", h, float("nan"), floor_per * 1e6, floor_per / base, 1.0,
+                             float("nan"), float("nan")))
             d, c = max_diff(got["in-process"]["npz"], got["robofmu"]["npz"])
             checks.append(f"h = {h * 1e3:g} ms: in-process vs robofmu master, max |diff| over all "
                           f"{len(np.load(got['robofmu']['npz'])['columns'])} outputs = {d:.3g} ({c})")
@@ -176,12 +209,15 @@ def main(argv=None) -> int:
                           f"max |q diff| = {d:.3g} (rad or m; {c})")
 
     print(f"{experiment}, {stop:g} s task; each runner in a fresh process\n")
-    header = (f"{'runner':<12}{'h (ms)':>8}{'wall (s)':>10}{'per step (us)':>15}{'ratio to in-process':>21}"
-              f"{'peak memory (MB)':>18}{'imports (MB)':>14}")
+    header = (f"{'runner':<12}{'h (ms)':>8}{'wall (s)':>10}{'per step (us)':>15}{'x in-process':>14}"
+              f"{'x C++ floor':>13}{'peak memory (MB)':>18}{'imports (MB)':>14}")
     print(header)
     print("-" * len(header))
-    for runner, h, wall, per, ratio, peak, imp in rows:
-        print(f"{runner:<12}{h * 1e3:>8g}{wall:>10.2f}{per:>15.1f}{ratio:>21.2f}{peak:>18.1f}{imp:>14.1f}")
+    for runner, h, wall, per, ratio, to_floor, peak, imp in rows:
+        print(f"{runner:<12}{h * 1e3:>8g}{_cell(wall, 10, '.2f')}{per:>15.1f}{ratio:>14.2f}"
+              f"{_cell(to_floor, 13, '.1f')}{_cell(peak, 18, '.1f')}{_cell(imp, 14, '.1f')}")
+    if floor_note:
+        print(f"\n{floor_note}")
     print(f"\nbest of {args.repeat} fresh processes. wall: whole call incl. loading/initializing the FMUs "
           "(libcosim: also unpacking the SSP);\nper step: stepping loop only; peak memory: VmHWM of the "
           "child process after the run (imports: the same before the run).\n")
@@ -198,6 +234,13 @@ def main(argv=None) -> int:
               f"({walls['robofmu']:.2f} vs {walls['libcosim']:.2f} s); "
               f"robofmu <= 2x in-process: {'met' if per['robofmu'] <= 2 * per['in-process'] else 'NOT met'} "
               f"({per['robofmu'] / per['in-process']:.2f}x)")
+        speedup = per["libcosim"] / per["robofmu"]
+        print(f"h = {h * 1e3:g} ms: robofmu >= 4x faster than libcosim per step: "
+              f"{'met' if speedup >= 4 else 'NOT met'} ({speedup:.2f}x)")
+        if "C++ floor" in per:
+            master, inproc = per["robofmu"] / per["C++ floor"], per["in-process"] / per["C++ floor"]
+            print(f"h = {h * 1e3:g} ms: robofmu master <= 20x the C++ floor: {'met' if master <= 20 else 'NOT met'} "
+                  f"({master:.1f}x); in-process <= 12x: {'met' if inproc <= 12 else 'NOT met'} ({inproc:.1f}x)")
     return 0
 
 

@@ -84,7 +84,7 @@ def main(argv=None) -> int:
         except Exception as exc:            # noqa: BLE001  (a note, not a failed benchmark)
             probe = f"C++ floor failed: {type(exc).__name__}: {exc}"
         if isinstance(probe, str):
-            notes.append(f"C++ floor skipped: {probe}")
+            notes.append(probe)
         else:
             runners.append(("C++ floor", lambda out: floor.run_floor(numbers, out)))
         for name, (environment, script) in PEERS.items():

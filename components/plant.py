@@ -88,21 +88,31 @@ class Plant:
         half, sixth = 0.5 * dt, dt / 6.0
         k1, k2, k3, k4 = self._stages
         x, stage, total = self._work, self._stage, self._total
-        at_x, at_stage = self._halves[0], self._halves[1]
-        d1, d2, d3, d4 = self._halves[3:]
-        derivative = self._derivative
+        (xq, xv), (sq, sv) = self._halves[0], self._halves[1]
+        (k1q, k1v), (k2q, k2v), (k3q, k3v), (k4q, k4v) = self._halves[3:]
+        if f_ext is None:
+            dynamics = self.robot.forward_dynamics_into
+        else:
+            wrench = self.robot.forward_dynamics
+
+            def dynamics(q, qd, tau, out):
+                out[:] = wrench(q, qd, tau, f_ext)
         x[:] = self.x
-        for _ in range(substeps):
-            derivative(at_x, tau, f_ext, d1)
+        for _ in range(substeps):                    # k = (qd, qdd) at the stage's state
+            k1q[:] = xv
+            dynamics(xq, xv, tau, k1v)
             np.multiply(k1, half, out=stage)
             np.add(x, stage, out=stage)
-            derivative(at_stage, tau, f_ext, d2)
+            k2q[:] = sv
+            dynamics(sq, sv, tau, k2v)
             np.multiply(k2, half, out=stage)
             np.add(x, stage, out=stage)
-            derivative(at_stage, tau, f_ext, d3)
+            k3q[:] = sv
+            dynamics(sq, sv, tau, k3v)
             np.multiply(k3, dt, out=stage)
             np.add(x, stage, out=stage)
-            derivative(at_stage, tau, f_ext, d4)
+            k4q[:] = sv
+            dynamics(sq, sv, tau, k4v)
             np.multiply(k2, 2.0, out=total)          # (dt/6) (k1 + 2 k2 + 2 k3 + k4), left to right
             np.add(k1, total, out=total)
             np.multiply(k3, 2.0, out=stage)
@@ -122,13 +132,3 @@ class Plant:
                     f"qd = {self.qd.tolist()}")
         self.x[:] = x
         return self.x
-
-    def _derivative(self, at, tau: np.ndarray, f_ext, out) -> None:
-        """out = (qd, qdd) at the state ``at`` = (q, qd); ``at`` and ``out`` as (q, qd) views."""
-        q, qd = at
-        out_q, out_qd = out
-        out_q[:] = qd
-        if f_ext is None:
-            self.robot.forward_dynamics_into(q, qd, tau, out_qd)
-        else:
-            out_qd[:] = self.robot.forward_dynamics(q, qd, tau, f_ext)

@@ -86,7 +86,8 @@ class IKBlock(Block):
         self.outside = False
         v = self.values                          # views, made once (the values array is never replaced)
         self._targets = (v[self.x], v[self.xd], v[self.xdd])
-        self._ratio = np.zeros(self.robot.n)
+        self._outputs = (v[self.q], v[self.qd], v[self.qdd])
+        self._limits = self.qd_limit.tolist()
         super().configure()
 
     def output(self, t):
@@ -98,9 +99,8 @@ class IKBlock(Block):
             finally:
                 for name, k in self.diagnostics:
                     v[k] = self.solver.report[name]
-            ratio = np.divide(np.abs(qd, out=self._ratio), self.qd_limit, out=self._ratio)
-            if ratio.max() > 1.0:
-                fastest = int(np.argmax(ratio))
+            if any(abs(rate) > limit for rate, limit in zip(qd.tolist(), self._limits)):
+                fastest = int(np.argmax(np.abs(qd) / self.qd_limit))
                 raise Unreachable(f"too close to a singularity: joint rate qd_ref[{fastest + 1}] = "
                                   f"{qd[fastest]:.6g} exceeds qd_limit[{fastest + 1}] = "
                                   f"{self.qd_limit[fastest]:g} at q = {np.round(q, 6).tolist()}")
@@ -118,7 +118,8 @@ class IKBlock(Block):
         v[self.reachable] = 1.0
         self.outside = False
         self.last = q
-        v[self.q], v[self.qd], v[self.qdd] = q, qd, qdd
+        q_out, qd_out, qdd_out = self._outputs
+        q_out[:], qd_out[:], qdd_out[:] = q, qd, qdd
 
     def advance(self, t, h):
         self.committed = self.last

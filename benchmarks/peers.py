@@ -32,6 +32,10 @@ sys.path.insert(0, str(HERE))
 import loop as loop_bench            # noqa: E402  (benchmarks/loop.py: run_child, max_diff)
 from loop_spec import spec as loop_spec   # noqa: E402
 
+#: Variants left out of the rounds, and why (each can be run alone with the peer's --variant).
+UNTIMED = {"bdsim + RTB": {"urdf-rk4": "RTB's pure-Python dynamics on the URDF robot, ~40 ms a step "
+                                       "(10-17 min a run); the mdh variants run the same robot on RTB's C code"}}
+
 #: A peer's variant follows robofmu's trajectory when its joints stay this close (rad) to it.
 SAME_TRAJECTORY = 1e-5
 
@@ -60,7 +64,7 @@ def variants(name: str) -> list[str]:
                           capture_output=True, text=True, cwd=HERE.parent)
     if proc.returncode != 0:
         raise RuntimeError(f"{name}: --list-variants failed\n{proc.stderr[-2000:]}")
-    return proc.stdout.split()
+    return [line.split()[0] for line in proc.stdout.splitlines() if line.strip()]
 
 
 def main(argv=None) -> int:
@@ -96,6 +100,9 @@ def main(argv=None) -> int:
                              "(make bench-peers creates it)")
                 continue
             for variant in variants(name):
+                if variant in UNTIMED.get(name, {}):
+                    notes.append(f"{name} ({variant}) not timed: {UNTIMED[name][variant]}")
+                    continue
                 runners.append((f"{name} ({variant})",
                                 lambda out, name=name, variant=variant: run_peer(name, spec_path, out, variant)))
         best: dict[str, dict] = {}

@@ -35,13 +35,29 @@ Variants (``--variant``; ``--list-variants`` prints them):
   max_substep = h: one RK4 step per interval, robofmu's plant integrator);
 - ``mdh-rk4-fused``: trajectory, IK and computed torque in one sampled block (a digital
   controller), so the solver's right-hand side evaluates only the plant;
+- ``mdh-rk4-continuous``: no clock and no hold: trajectory, IK and computed torque in one
+  continuous-time block (``ContinuousBlock`` with direct feedthrough; its state is the integral
+  z of the joint error, z' = q_ref - q) evaluated at every right-hand-side call (the computed
+  torque at each; the reference, a function of t alone, once per distinct time: an RK4 step's
+  middle stages share one, its last stage the next step's first, reused exactly), its grip
+  straight into the plant, so that bdsim integrates the whole horizon in ONE solve_ivp run
+  (fixed-step RK4 of step h; the grip instants 6.0 s and 11.5 s fall on step boundaries, where
+  the step ending there sees the new grip at its last stage). A different system from robofmu's:
+  a continuous-time controller, not a sampled one, so its trajectory differs from robofmu's by
+  the hold's effect. tau is the block's output at t_k (watched on the solver's own points). Not
+  faster than ``mdh-rk4-fused`` for all its single solve_ivp run: the reference (trajectory + IK
+  on the URDF robot, ~160 us a call) is needed at three distinct times a step (t_k + h/2, t_k + h
+  and bdsim's replay of the point t_k after the run) and the computed torque at five, against
+  once each for the sampled controller, which outweighs the ~50-100 us a solve_ivp restart costs;
 - ``mdh-rk45``: as ``mdh-rk4`` with scipy's RK45 (first step and max_step = h);
 - ``urdf-rk4``: as ``mdh-rk4`` with the dynamics on the URDF ``Robot`` (``Robot.URDF``) itself:
   RTB's pure-Python spatial-vector RNE, some 100x slower a call.
 
 The ``loop`` time is ``sim.run`` alone (not the imports, loading the URDF or compiling the
 diagram). Output rows are the solver's own points at the interval ends (no interpolation); the
-controller's tau is read from the clock's state log.
+sampled controller's tau is read from the clock's state log, the continuous one's from bdsim's watch
+of its output at those points. ``order`` in the RESULT is the integrator's order (4 for RK4, 5 for
+RK45); ``solve_ivp_runs`` counts bdsim's solve_ivp calls (one per clock interval, or one).
 """
 from __future__ import annotations
 
@@ -64,6 +80,11 @@ VARIANTS = {
     "mdh-rk4-fused": ("mdh", "RK4", "fused",
                       "trajectory, IK and computed torque in one sampled block, FDYN plant; "
                       "modified-DH DHRobot dynamics (C RNE); fixed-step RK4, max_step = h"),
+    "mdh-rk4-continuous": ("mdh", "RK4", "continuous",
+                           "trajectory, IK and computed torque as one continuous-time (non-sampled) "
+                           "block evaluated at every right-hand-side call, no clock: one solve_ivp run "
+                           "over the whole horizon; modified-DH DHRobot dynamics (C RNE); fixed-step "
+                           "RK4, step h (not robofmu's zero-order-hold controller)"),
     "mdh-rk45": ("mdh", "RK45", "blocks",
                  "as mdh-rk4 with solve_ivp's RK45 (first step and max_step = h)"),
     "urdf-rk4": ("urdf", "RK4", "blocks",
@@ -366,20 +387,23 @@ def rk4_method():
             super().__init__(fun, t0, y0, t_bound, vectorized)
             n = max(1, math.ceil((t_bound - t0) / max_step - 1e-9)) if np.isfinite(max_step) else 1
             self.dt = (t_bound - t0) / n
+            self.t_start, self.n_steps, self.i = t0, n, 0
             self.y_old = None
 
         def _step_impl(self):
             t, y, dt = self.t, self.y, self.dt
-            last = t + 1.5 * dt >= self.t_bound
-            if last:
-                dt = self.t_bound - t
+            self.i += 1
+            last = self.i >= self.n_steps
+            # the step's end t0 + i dt (exact at one-step intervals; no drift over many steps)
+            t_end = self.t_bound if last else self.t_start + self.i * self.dt
+            dt = t_end - t
             k1 = self.fun(t, y)
             k2 = self.fun(t + 0.5 * dt, y + 0.5 * dt * k1)
             k3 = self.fun(t + 0.5 * dt, y + 0.5 * dt * k2)
-            k4 = self.fun(t + dt, y + dt * k3)
+            k4 = self.fun(t_end, y + dt * k3)
             self.y_old = y
             self.y = y + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-            self.t = self.t_bound if last else t + dt
+            self.t = t_end
             return True, None
 
         def _dense_output_impl(self):
@@ -391,7 +415,7 @@ def rk4_method():
 # -- the diagram -------------------------------------------------------------------------------------
 def build(spec: dict, variant: str):
     import bdsim
-    from bdsim.block import SampledBlock
+    from bdsim.block import ContinuousBlock, SampledBlock
     from bdsim.blocks.functions import Function
     from bdsim.blocks.sampled import ZOH
     from bdsim.blocks.sources import Time
@@ -447,6 +471,37 @@ def build(spec: dict, variant: str):
             tau = control(q_ref, qd_ref, qdd_ref, q, qd, grip, z)
             return np.r_[tau, z + (q_ref - q) * h, grip]
 
+    class ContinuousController(ContinuousBlock):
+        """Trajectory, IK and computed torque in continuous time (no clock, no hold), evaluated
+        at every right-hand-side call: inputs q, qd; state z (the integral of the joint error,
+        z' = q_ref - q); outputs tau and grip, both functions of (t, q, qd, z) now, with direct
+        feedthrough from q, qd."""
+
+        def __init__(self, **blockargs):
+            super().__init__(nstates=n, x0=np.zeros(n), feedthrough=True, nin=2, nout=2, **blockargs)
+            self._refs = {}                  # t -> (q_ref, qd_ref, qdd_ref, grip), the latest few
+
+        def reference(self, t):
+            """Trajectory + IK at t: a function of t alone, so the value at a time already asked
+            for (an RK4 step's two middle stages share a time, and its last stage the next step's
+            first) is reused, exactly, from the latest few times."""
+            ref = self._refs.get(t)
+            if ref is None:
+                x_ref, xd_ref, xdd_ref, grip = traj(t)
+                ref = (*ik(x_ref, xd_ref, xdd_ref), grip)
+                if len(self._refs) >= 4:
+                    del self._refs[next(iter(self._refs))]
+                self._refs[t] = ref
+            return ref
+
+        def output(self, t, inputs, x):
+            q, qd = inputs
+            q_ref, qd_ref, qdd_ref, grip = self.reference(t)
+            return [control(q_ref, qd_ref, qdd_ref, q, qd, grip, x), grip]
+
+        def deriv(self, t, inputs, x):
+            return self.reference(t)[0] - inputs[0]
+
     class Plant(FDyn):
         """RTB's FDYN with a second input: the (held) grip, carrying the payload while closed."""
 
@@ -472,9 +527,16 @@ def build(spec: dict, variant: str):
     sim = bdsim.BDSim(sysargs=False, banner=False, graphics=False, animation=False, progress=False,
                       quiet=True, toolboxes=False)
     bd = sim.blockdiagram(name="chess-pd")
-    clock = bd.clock(h, "s", name="control")
+    # no clock in the continuous variant: a clock's ticks would split the run into intervals
+    clock = None if structure == "continuous" else bd.clock(h, "s", name="control")
     plant = Plant(plant_robot, q0, qd0, bd=bd, name="plant")
-    if structure == "blocks":
+    if structure == "continuous":
+        ctc = ContinuousController(bd=bd, name="controller")
+        bd.connect(plant[0], ctc[0])
+        bd.connect(plant[1], ctc[1])
+        bd.connect(ctc[0], plant[0])
+        bd.connect(ctc[1], plant[1])
+    elif structure == "blocks":
         t_src = Time(bd=bd, name="time")
         ref = Function(lambda t: list(traj(t)), nin=1, nout=4, bd=bd, name="trajectory")
         ikb = Function(lambda x, xd, xdd: list(ik(x, xd, xdd)), nin=3, nout=3, bd=bd, name="ik")
@@ -497,7 +559,7 @@ def build(spec: dict, variant: str):
         bd.connect(ctc[1], plant[1])
     with contextlib.redirect_stdout(sys.stderr):      # its notes (FDYN's qdd output unused) off stdout
         bd.compile(report=False, verbose=False)
-    return sim, bd, clock, ctc, {"method": rk4_method() if method == "RK4" else rk45_interval_method()}
+    return sim, bd, clock, plant, ctc, {"method": rk4_method() if method == "RK4" else rk45_interval_method()}
 
 
 def rk45_interval_method():
@@ -518,12 +580,16 @@ def run(spec: dict, variant: str, out: Path) -> dict:
 
     h, stop, N = float(spec["h"]), float(spec["stop"]), int(spec["n_steps"])
     n = 4
-    sim, bd, clock, ctc, solver_args = build(spec, variant)
+    sim, bd, clock, plant, ctc, solver_args = build(spec, variant)
+    continuous = clock is None
+    # the continuous controller's tau, logged by bdsim at the solver's points (its output there)
+    watch = [ctc[0]] if continuous else None
     t0 = time.perf_counter()
     # max_step: the plant's max_substep (robofmu's RK4 sub-step; h in chess-pd), a hair over it
     # since an interval k h - (k - 1) h may round to just above h, which would add a 1e-16 s step
+    # (over one run of the whole horizon: ceil(stop / max_step) = N equal steps of stop / N = h)
     max_step = min(h, float(spec["plant"]["max_substep"])) * (1.0 + 1e-9)
-    res = sim.run(bd, T=stop, max_step=max_step, solver_args=solver_args)
+    res = sim.run(bd, T=stop, max_step=max_step, solver_args=solver_args, watch=watch)
     loop = time.perf_counter() - t0
 
     grid = h * np.arange(N + 1)
@@ -537,7 +603,38 @@ def run(spec: dict, variant: str, out: Path) -> dict:
     if np.max(np.abs(t_out[k] - grid)) > 1e-9:
         raise RuntimeError("the solver's points miss some communication points")
     X = x_out[k]
-    # tau at t_k: the controller's state logged at each tick (t = h .. stop), its x0 at t = 0
+    offset = 0                           # the plant's [q, qd] in the continuous state vector
+    for b in bd.blocklist:
+        if b is plant:
+            break
+        if b.blockclass == "continuous":
+            offset += b.nstates
+    X = X[:, offset:offset + 2 * n]
+    if continuous:
+        tau = np.asarray(res["y"], float)[:, :n]
+        if tau.shape[0] != len(t_out):
+            raise RuntimeError("the watched tau does not match the solver's points")
+        data = np.hstack([X[:, :n], X[:, n:2 * n], tau[k]])
+    else:
+        data = np.hstack([X[:, :n], X[:, n:2 * n], _clock_tau(res, clock, ctc, grid, n)])
+    columns = ([f"plant.q[{j}]" for j in range(1, n + 1)] + [f"plant.qd[{j}]" for j in range(1, n + 1)]
+               + [f"controller.tau[{j}]" for j in range(1, n + 1)])
+    np.savez(out, time=grid, data=data, columns=np.array(columns))
+    stats = res[".stats"] if ".stats" in res else None
+    method = VARIANTS[variant][1]
+    info = {"peer": "bdsim + RTB",
+            "version": f"bdsim {_version('bdsim')}, roboticstoolbox {getattr(rtb, '__version__', '?')}",
+            "variant": variant, "order": {"RK4": 4, "RK45": 5}[method], "loop": loop, "n_steps": N,
+            "per_step": loop / N, "interpolated": False}
+    if stats is not None:
+        info["rhs_calls"] = int(stats["ydot_calls"])
+        info["solve_ivp_runs"] = int(stats["run_interval_calls"])
+    return info
+
+
+def _clock_tau(res, clock, ctc, grid, n: int):
+    """The sampled controller's tau at t_k: its state logged at each tick (t = h .. stop), its
+    x0 at t = 0."""
     log = next(res[key] for key in ("clock0", clock.name.replace(".", "")) if key in res)
     t_log = np.asarray(log["t"], float)
     x_log = np.asarray(log["X"] if "X" in log else log["x"], float)
@@ -552,18 +649,7 @@ def run(spec: dict, variant: str, out: Path) -> dict:
     kt = np.minimum(kt, len(t_tau) - 1)
     if np.max(np.abs(t_tau[kt] - grid)) > 1e-9:
         raise RuntimeError("the clock log misses some ticks")
-    data = np.hstack([X[:, :n], X[:, n:2 * n], tau[kt]])
-    columns = ([f"plant.q[{j}]" for j in range(1, n + 1)] + [f"plant.qd[{j}]" for j in range(1, n + 1)]
-               + [f"controller.tau[{j}]" for j in range(1, n + 1)])
-    np.savez(out, time=grid, data=data, columns=np.array(columns))
-    stats = res[".stats"] if ".stats" in res else None
-    info = {"peer": "bdsim + RTB",
-            "version": f"bdsim {_version('bdsim')}, roboticstoolbox {getattr(rtb, '__version__', '?')}",
-            "variant": variant, "loop": loop, "n_steps": N, "per_step": loop / N,
-            "interpolated": False}
-    if stats is not None:
-        info["rhs_calls"] = int(stats["ydot_calls"])
-    return info
+    return tau[kt]
 
 
 def _version(dist: str) -> str:

@@ -7,7 +7,9 @@ start values, timed three ways in this process:
 
 - ``logic``: the FMI-free block (``robofmu.components.blocks``): set inputs, output, advance;
 - ``in-process slave``: robofmu's pythonfmu slave class (``BlockSlave``) called directly from
-  Python with lists, as pythonfmu's C++ layer calls it: logic + the FMU-side wrapper;
+  Python as robofmu's export library calls it on its fast path (the values written and read
+  in place, ``_fast_refresh`` before reading outputs, ``_fast_step``): logic + the FMU-side
+  wrapper;
 - ``through FMI``: the built FMU, called through the master's own bound functions
   (``ctypes.PyDLL``, preallocated arrays): logic + wrapper + the boundary (ctypes, pythonfmu's
   C++ layer, robofmu's export library).
@@ -80,13 +82,17 @@ def main(argv=None) -> int:
         slave.exit_initialization_mode()
         slave_clock = [0]
 
-        def in_process(k, slave=slave, clock=slave_clock):
-            if vin:
-                slave.set_real(vin, values)
-            slave.get_real(vout)
-            if vbool:
-                slave.get_boolean(vbool)
-            slave.do_step(clock[0] * H, H)
+        slots_in, slots_out = np.array(vin, dtype=np.intp), np.array(vout + vbool, dtype=np.intp)
+        start_in, read = np.array(values), np.zeros(len(vout) + len(vbool))
+
+        def in_process(k, slave=slave, clock=slave_clock, shared=slave._shared, held=slave.values):
+            # what robofmu's export library does on its fast path (robofmu_fmi2.c), in Python:
+            if vin:                       # fmi2SetReal: the values written, the outputs stale
+                held[slots_in] = start_in
+                shared.dirty = 1
+            slave._fast_refresh()         # fmi2GetReal / fmi2GetBoolean: outputs brought up to date,
+            held.take(slots_out, out=read)    # then copied
+            slave._fast_step(clock[0] * H, H)     # fmi2DoStep
             clock[0] += 1
 
         fmu = Block(node.path, name)

@@ -58,15 +58,16 @@ class _LSPBPiece:
 
     def __init__(self, x0, x1, T: float, cruise_factor: float):
         self.x0 = np.asarray(x0, dtype=float)
-        dx = np.asarray(x1, dtype=float) - self.x0
         self.T = T
-        self.V = cruise_factor * dx / T
         self.tb = T - T / cruise_factor
-        self.a = self.V / self.tb
-        self.half_a = 0.5 * self.a
-        self.minus_a = -self.a
-        self.cruise_start = self.x0 + self.half_a * self.tb * self.tb
-        self.end = self.x0 + dx
+        with np.errstate(all="ignore"):     # extreme parameters: the trajectory block refuses them
+            dx = np.asarray(x1, dtype=float) - self.x0
+            self.V = cruise_factor * dx / T
+            self.a = self.V / self.tb
+            self.half_a = 0.5 * self.a
+            self.minus_a = -self.a
+            self.cruise_start = self.x0 + self.half_a * self.tb * self.tb
+            self.end = self.x0 + dx
 
     def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray) -> None:
         T, tb = self.T, self.tb

@@ -20,13 +20,24 @@ in front of pythonfmu's and returns the status of every message logged with the 
 is fmi2Error (:meth:`BlockSlave.fail`, :meth:`BlockSlave._raise_to_importer`), and the instance
 stays usable. Behind pythonfmu's library alone (its win64 one, or a slave used without a FMU)
 only raising fails a call (fmi2Fatal), and a refused step is fmi2Discard.
+
+The fast path: behind robofmu's export library the slave, once constructed, registers with it
+(:class:`_FastShared`: its ``values`` array, which masks of slots are Real / Boolean / Real
+inputs, the flags ``_initialized``/``_terminated``, ``_dirty`` and ``_inputs_checked`` as shared
+fields, and :meth:`BlockSlave._fast_refresh`, :meth:`BlockSlave._fast_step`). While initialized,
+that library then serves fmi2SetReal of inputs, fmi2GetReal / fmi2GetBoolean and fmi2DoStep
+itself, calling only those two methods (the header comment of ``robofmu_fmi2.c``, point 4); all
+other calls still come here through pythonfmu. So ``values`` is never rebound.
 """
 from __future__ import annotations
 
+import _ctypes
 import ctypes
 import functools
 import json
 import math
+import operator
+import os
 import sys
 import traceback
 from pathlib import Path
@@ -42,6 +53,7 @@ from ..blocks import StepRefused, block_type
 from ..robots import load_description, load_model
 from ..robots.description import read
 from .model_description import PYTHON, VENDOR_TOOL, complete  # noqa: F401  (VENDOR_TOOL: public here)
+from .quiet import quietly
 
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
 _VARIABILITY = {v.name: v for v in Fmi2Variability}
@@ -60,6 +72,23 @@ def _behind_robofmu_export(resources) -> bool:
     pythonfmu's own library beside robofmu's in ``binaries/linux64`` (``robofmu.system.fmi_export``)."""
     return (bool(resources) and sys.platform.startswith("linux")
             and (Path(resources).parent / "binaries" / "linux64" / _PYTHONFMU_LIBRARY).is_file())
+
+
+class _FastShared(ctypes.Structure):
+    """What robofmu's export library reads and writes of a slave on its fast path
+    (``robofmu_fmi2.c``: ``FastShared``, the same layout). The slave owns it and the arrays it
+    points to, as long as it lives; the library uses it between fmi2Instantiate and
+    fmi2FreeInstance only."""
+    _fields_ = [("version", ctypes.c_uint32), ("size", ctypes.c_uint32),
+                ("values", ctypes.c_void_p), ("n", ctypes.c_size_t),
+                ("get_real", ctypes.c_void_p), ("get_boolean", ctypes.c_void_p), ("set_real", ctypes.c_void_p),
+                ("active", ctypes.c_int32), ("dirty", ctypes.c_int32), ("inputs_checked", ctypes.c_int32),
+                ("call", ctypes.c_int32)]
+
+
+_FAST_VERSION = 1                   # robofmu_fmi2.c: FAST_VERSION
+_FAST_OK, _FAST_MESSAGES = 1, 2     # what _fast_refresh and _fast_step return, as bits
+_FAST_CALLS = {1: "fmi2GetReal", 2: "fmi2GetBoolean"}       # FastShared.call
 
 
 class _CallFailed(RuntimeError):
@@ -85,6 +114,9 @@ class BlockSlave(Fmi2Slave):
     block_kind: str = ""
 
     def __init__(self, **kwargs):
+        self._shared = _FastShared(version=_FAST_VERSION, size=ctypes.sizeof(_FastShared))   # the flags live here
+        self._initialized_flag = self._terminated_flag = False
+        self.fast_path = False          # whether robofmu's export library serves the hot calls
         super().__init__(**kwargs)
         self._statuses = _behind_robofmu_export(self.resources)     # see _fmi_entry
         _balance_pythonfmu_refcount(type(self))
@@ -103,7 +135,7 @@ class BlockSlave(Fmi2Slave):
                                                     step_size=1e-3)
         self.time = 0.0
         self._dirty = True
-        self._inputs_checked = False     # the current inputs were found finite (reset by any set)
+        self._inputs_checked = False
         self._initialized = False
         self._terminated = False
         self._held_warned = False
@@ -125,6 +157,93 @@ class BlockSlave(Fmi2Slave):
         self._parameter_slots = np.flatnonzero(self._real & (causalities == "parameter"))
         self._indices: dict[tuple, np.ndarray] = {}
         self._names = [v.name for v in self.logic.variables]
+        self._feedthrough = self.logic.feedthrough   # outputs that depend on inputs (else on state only)
+        self._fast_masks = [np.ascontiguousarray(mask, dtype=np.uint8)
+                            for mask in (self._real, kinds == "Boolean", self._input_real)]
+        if self._statuses:
+            self.fast_path = self._register_fast_path()       # last: the instance is complete
+
+    # -- the flags robofmu's export library shares (the module docstring: the fast path) --------
+    # Read in the hot path: getters without a Python frame (1 / 0 for the shared int32 fields).
+    def _set_dirty(self, value) -> None:
+        self._shared.dirty = 1 if value else 0
+
+    def _set_inputs_checked(self, value) -> None:
+        self._shared.inputs_checked = 1 if value else 0
+
+    def _set_initialized(self, value) -> None:
+        self._initialized_flag = bool(value)
+        self._shared.active = int(self._initialized_flag and not self._terminated_flag)
+
+    def _set_terminated(self, value) -> None:
+        self._terminated_flag = bool(value)
+        self._shared.active = int(self._initialized_flag and not self._terminated_flag)
+
+    _dirty = property(operator.attrgetter("_shared.dirty"), _set_dirty,
+                      doc="The outputs are stale: inputs or time changed since they were computed.")
+    _inputs_checked = property(operator.attrgetter("_shared.inputs_checked"), _set_inputs_checked,
+                               doc="The current inputs were found finite (reset by any set).")
+    _initialized = property(operator.attrgetter("_initialized_flag"), _set_initialized)
+    _terminated = property(operator.attrgetter("_terminated_flag"), _set_terminated)
+
+    def _register_fast_path(self) -> bool:
+        """Register with robofmu's export library of this instance's FMU, the one the importer
+        loaded from its ``binaries/linux64`` (already loaded: found with RTLD_NOLOAD, the handle
+        closed again after). It accepts only inside its fmi2Instantiate (or fmi2Reset) of this
+        instance; True if it did."""
+        values = self.values
+        if values.dtype != np.float64 or not values.flags.c_contiguous or not values.flags.writeable:
+            return False
+        shared = self._shared
+        shared.values = values.ctypes.data
+        shared.n = values.size
+        shared.get_real, shared.get_boolean, shared.set_real = (m.ctypes.data for m in self._fast_masks)
+        folder = Path(self.resources).parent / "binaries" / "linux64"
+        for path in sorted(folder.glob("*.so")):
+            if path.name == _PYTHONFMU_LIBRARY:
+                continue
+            try:
+                library = ctypes.PyDLL(str(path), mode=os.RTLD_NOLOAD)
+            except OSError:
+                continue            # not loaded in this process: not the importer's library
+            try:
+                register = getattr(library, "robofmu_fast_register", None)
+                if register is None:
+                    continue
+                register.restype = ctypes.c_int
+                register.argtypes = [ctypes.c_void_p, ctypes.py_object, ctypes.py_object]
+                if register(ctypes.addressof(shared), self._fast_refresh, self._fast_step) == 1:
+                    return True
+            finally:
+                _ctypes.dlclose(library._handle)
+        return False
+
+    def _fast_refresh(self) -> int:
+        """The fast path's refresh(): the outputs brought up to date as fmi2GetReal /
+        fmi2GetBoolean (``_shared.call``) do here. Never raises: _FAST_OK if it succeeded,
+        +_FAST_MESSAGES if messages wait in the log queue."""
+        try:
+            if self._shared.dirty:
+                self._refresh()
+            done = _FAST_OK
+        except BaseException as exc:    # nothing may reach the C caller
+            self._report_failure(exc, _FAST_CALLS.get(self._shared.call, "fmi2GetReal"))
+            done = 0
+        return (done | _FAST_MESSAGES) if self.log_queue else done
+
+    def _fast_step(self, current_time: float, step_size: float) -> int:
+        """The fast path's step(t, h): :meth:`do_step`; returns as :meth:`_fast_refresh`."""
+        try:
+            done = _FAST_OK if self._do_step(current_time, step_size) else 0
+        except BaseException as exc:    # do_step catches every Exception; this the rest
+            self._report_failure(exc, "fmi2DoStep")
+            done = 0
+        return (done | _FAST_MESSAGES) if self.log_queue else done
+
+    def _report_failure(self, exc: BaseException, call: str) -> None:
+        """Log the exception that failed ``call`` (a _CallFailed is logged already)."""
+        if not isinstance(exc, _CallFailed):
+            self._report(f"{call} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
 
     def _own_description(self):
         """The robot's description from this FMU's own resources folder.
@@ -222,8 +341,9 @@ class BlockSlave(Fmi2Slave):
     def set_real(self, vrs, values):
         allowed = self._input_real if self._initialized else self._settable_real
         self.values[self._index(vrs, allowed, "fmi2SetReal")] = values
-        self._dirty = True
-        self._inputs_checked = False
+        shared = self._shared           # _dirty, _inputs_checked
+        shared.dirty = 1
+        shared.inputs_checked = 0
 
     def _check_kind(self, vrs, kind: str, call: str, setting: bool = False) -> None:
         """Refuse value references that are not ``kind`` variables (or, when ``setting``, not
@@ -354,35 +474,41 @@ class BlockSlave(Fmi2Slave):
     def _output_safely(self) -> None:
         """Outputs at the current time from the current inputs; never a non-finite one: a
         non-finite input or output holds the previous outputs and makes the next step fail."""
-        bad = self.nonfinite_input()
-        self._inputs_checked = bad is None
-        if bad is not None:
-            if not self._held_warned:
-                self.warn(f"input {bad} at t = {self.time:.9g} s is not finite: outputs held at their "
-                          "last values; the next step will fail")
-                self._held_warned = True
-            return
-        held = self.values.take(self._output_slots, out=self._held)
+        shared = self._shared
+        if not shared.inputs_checked:                   # inputs set since the last check
+            bad = self.nonfinite_input()
+            if bad is not None:
+                if not self._held_warned:
+                    self.warn(f"input {bad} at t = {self.time:.9g} s is not finite: outputs held at their "
+                              "last values; the next step will fail")
+                    self._held_warned = True
+                return
+            shared.inputs_checked = 1
+        values = self.values
+        held = values.take(self._output_slots, out=self._held)
         try:
-            with np.errstate(all="ignore"):    # an overflow is reported below, not as a host warning
-                self.logic.output(self.time)
+            quietly(self.logic.output, self.time)    # an overflow is reported below, not as a host warning
         except Exception as exc:
             self.values[self._output_slots] = held
             self._bad_output = f"evaluating outputs failed: {type(exc).__name__}: {exc}"
             self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}\n"
                      f"{traceback.format_exc()}", Fmi2Status.error)
             return
-        bad = self._nonfinite_output()
-        if bad is not None:
-            self.values[self._output_slots] = held
-            self._bad_output = f"{bad}: outputs held at their last values"
-            self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
-            return
+        if not math.isfinite(values.dot(self._output_mask)):     # else every output is finite
+            bad = self._nonfinite_output()
+            if bad is not None:
+                values[self._output_slots] = held
+                self._bad_output = f"{bad}: outputs held at their last values"
+                self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
+                return
         self._bad_output = None
-        self._dirty = False
+        shared.dirty = 0                # _dirty
 
     def _step_problem(self, current_time: float, step_size: float) -> str | None:
         """Why ``fmi2DoStep(current_time, step_size)`` cannot run now, or None."""
+        if (self._shared.active and 0.0 < step_size < math.inf      # the usual case, in one test
+                and abs(current_time - self.time) <= 1e-9 * max(1.0, abs(self.time))):
+            return None
         if self._terminated:
             return "fmi2DoStep: the instance is terminated"
         if not self._initialized:
@@ -398,16 +524,18 @@ class BlockSlave(Fmi2Slave):
         problem = self._step_problem(current_time, step_size)
         if problem is not None:
             return self.fail(problem)
+        shared = self._shared
         try:
-            bad = None if self._inputs_checked else self.nonfinite_input()     # once per step
-            if bad is not None:
-                return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
-            if self._dirty:
+            if not shared.inputs_checked:                   # once per setting of the inputs
+                bad = self.nonfinite_input()
+                if bad is not None:
+                    return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
+                shared.inputs_checked = 1
+            if self._feedthrough and shared.dirty:
                 self._output_safely()          # the state a feedthrough block keeps (IK's last solution)
             if self._bad_output is not None:
                 return self.fail(f"t = {current_time:.9g} s: {self._bad_output}; step refused")
-            with np.errstate(all="ignore"):
-                self.logic.advance(current_time, step_size)
+            quietly(self.logic.advance, current_time, step_size)
         except StepRefused as exc:
             return self.fail(str(exc))
         except Exception as exc:
@@ -415,7 +543,7 @@ class BlockSlave(Fmi2Slave):
                              f"{traceback.format_exc()}")
         self.time = current_time + step_size
         self._held_warned = False
-        self._dirty = True      # internal state moved on: outputs at t + h are due
+        shared.dirty = 1        # _dirty: internal state moved on, outputs at t + h are due
         return True
 
     # -- FMU state ------------------------------------------------------------------------------------
@@ -432,7 +560,7 @@ class BlockSlave(Fmi2Slave):
     def _get_fmu_state(self):
         return {"identity": self._identity(), "parameters": self._parameters(), "time": self.time,
                 "values": self.values.tolist(), "settings": dict(self.logic.settings),
-                "dirty": self._dirty, "initialized": self._initialized, "terminated": self._terminated,
+                "dirty": bool(self._dirty), "initialized": self._initialized, "terminated": self._terminated,
                 "bad_output": self._bad_output, "logic": self.logic.internal_state()}
 
     def _state_problem(self, state) -> str | None:
@@ -519,8 +647,7 @@ def _fmi_entry(method, fallback, call: str):
         try:
             return method(self, *args)
         except Exception as exc:
-            if not isinstance(exc, _CallFailed):
-                self._report(f"{call} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
+            self._report_failure(exc, call)
             if not self._statuses:
                 _keep_for_pythonfmu_handler(self)
                 raise
@@ -546,3 +673,5 @@ for _name, _call, _fallback in [
         ("_get_fmu_state", "fmi2GetFMUstate", _NOTHING),
         ("_set_fmu_state", "fmi2SetFMUstate", _NOTHING)]:
     setattr(BlockSlave, _name, _fmi_entry(getattr(BlockSlave, _name), _fallback, _call))
+# The fast path's step calls do_step unwrapped: _fast_step itself catches, logs and fails.
+BlockSlave._do_step = BlockSlave.do_step.__wrapped__

@@ -3,8 +3,9 @@
    Every robofmu FMU carries, in binaries/linux64/, this library as <modelIdentifier>.so and
    pythonfmu 0.7.0's own export library, unchanged, as libpythonfmu-export.so. The importer
    loads this one; it loads pythonfmu's from its own folder and forwards every FMI function to
-   it, changing two things (robofmu.system.fmi_export explains why; docs/design.md too) and
-   guarding against a third (point 3):
+   it, changing two things (robofmu.system.fmi_export explains why; docs/design.md too),
+   guarding against a third (point 3) and serving the hot calls of robofmu's slave itself, with
+   the same results (point 4):
 
    1. Statuses. A message the Python slave logs with the category "robofmu:status" makes the
       FMI call during which it is logged return at least the message's status (fmi2Error for a
@@ -35,14 +36,57 @@
       pythonfmu's library loaded in a process never unloads, and the next FMU would start a
       second interpreter, in which numpy cannot be imported again.)
 
+   4. The fast path. pythonfmu's library makes every FMI call a Python method call looked up by
+      name, with Python lists of value references and values built and converted and the log
+      queue read back (about 6 µs a call). For the calls of a master's hot loop this layer
+      serves robofmu's slave itself, through the FMI functions it exports (nothing else reaches
+      the slave): the slave, as it is constructed inside fmi2Instantiate, finds this library
+      (the one its FMU's binaries/linux64 holds, already loaded: dlopen with RTLD_NOLOAD) and
+      calls robofmu_fast_register with a struct it owns (FastShared: the address and length of
+      its float64 `values` array, whose slot is the value reference; a byte per slot for Real
+      gettable, Boolean gettable, Real settable as an input; flags it reads and writes as
+      attributes: initialized and not terminated, outputs stale (dirty), inputs checked) and two
+      callables, refresh() (bring the outputs up to date, as its get_real does when stale) and
+      step(t, h) (its do_step), which catch every exception and return 1 if they succeeded, +2
+      if messages wait in its log queue. A registration outside this library's fmi2Instantiate
+      (or fmi2Reset) in the same thread is refused, so is one with another struct version or
+      size, or where a Python C-API function below cannot be found (dlsym(RTLD_DEFAULT): the
+      functions pythonfmu's library binds to; nothing links libpython), or with the
+      environment variable ROBOFMU_FMI_FAST_PATH=0. The component fmi2Instantiate returns keeps
+      new references to the callables until fmi2FreeInstance (fmi2Reset: until the slave is
+      constructed anew) releases them, holding the GIL, before pythonfmu frees the slave.
+      Then, while the slave is initialized and not terminated:
+      - fmi2SetReal of Real inputs only writes values[vr], marks the outputs stale and the
+        inputs unchecked: no Python at all;
+      - fmi2GetReal of Real variables only and fmi2GetBoolean of Boolean variables only call
+        refresh() if the outputs are stale (PyGILState_Ensure: the host may hold the GIL, as
+        the master's ctypes.PyDLL calls do, or not, as libcosim's threads), then copy the
+        values (a Boolean is value != 0.0); if refresh() failed, zeros / false, as the slave's
+        get_real does;
+      - fmi2DoStep calls step(t, h); a refused step is fmi2Discard from pythonfmu, so it is
+        here, raised to the logged status (fmi2Error: point 1). The status pythonfmu's
+        fmi2GetRealStatus (fmi2LastSuccessfulTime) and fmi2GetBooleanStatus (fmi2Terminated)
+        would give after it are kept here and answered.
+      When the slave says messages wait, this layer calls pythonfmu's fmi2GetString with no
+      value references (the slave's get_string([]) does nothing) before returning: pythonfmu
+      drains the queue into filter() during the current call, so messages are filtered and set
+      the call's status exactly as without the fast path. Every other call, and these with a
+      value reference out of range or of another type or causality (so the error messages are
+      pythonfmu's and the slave's), before initialization, after fmi2Terminate, and in an
+      instance that did not register, goes to pythonfmu as before. robofmu_fast_path(c) says
+      whether an instance registered, robofmu_fast_calls(c) how many calls it served.
+
    Everything else is pythonfmu's, fmi2Fatal after a Python exception included (robofmu's
-   slave lets none reach it: it fails calls through point 1). Nothing here uses Python's API. */
+   slave lets none reach it: it fails calls through point 1). Only the fast path (point 4)
+   uses Python's API, resolved at run time. */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <elf.h>
 #include <fcntl.h>
 #include <link.h>
+#include <math.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -252,6 +296,112 @@ __attribute__((destructor)) static void unload_stock(void)
     }
 }
 
+/* -- Python's C API, for the fast path (point 4 of the header comment) ------------------------- */
+/* Resolved at the first registration, as pythonfmu's library binds to it (dlsym(RTLD_DEFAULT):
+   the interpreter of a Python host, or the libpython a host that is not Python preloads). No
+   Python header: objects are opaque here, only passed back to Python. */
+typedef struct PyObjectOpaque PyObject;
+typedef int PyGILState;                     /* PyGILState_STATE, an enum */
+
+#define PYTHON_FUNCTIONS(X) \
+    X(PyGILState, PyGILState_Ensure, (void)) \
+    X(void, PyGILState_Release, (PyGILState)) \
+    X(PyObject*, PyObject_CallObject, (PyObject*, PyObject*)) \
+    X(PyObject*, PyObject_CallFunction, (PyObject*, const char*, ...)) \
+    X(long, PyLong_AsLong, (PyObject*)) \
+    X(PyObject*, PyErr_Occurred, (void)) \
+    X(void, PyErr_Clear, (void)) \
+    X(void, Py_IncRef, (PyObject*)) \
+    X(void, Py_DecRef, (PyObject*))
+
+static struct {
+#define FIELD(ret, name, params) ret (*name) params;
+    PYTHON_FUNCTIONS(FIELD)
+#undef FIELD
+} py;
+
+static int py_resolved = 0;                 /* 0: not yet; 1: all found; -1: one is missing */
+
+static int python_api(void)
+{
+    int state = __atomic_load_n(&py_resolved, __ATOMIC_ACQUIRE);
+    if (state != 0) return state > 0;
+#define RESOLVE_PY(ret, name, params)                                                         \
+    *(void**)(&py.name) = dlsym(RTLD_DEFAULT, #name);                                         \
+    if (py.name == NULL) {                                                                    \
+        __atomic_store_n(&py_resolved, -1, __ATOMIC_RELEASE);                                 \
+        return 0;                                                                             \
+    }
+    PYTHON_FUNCTIONS(RESOLVE_PY)
+#undef RESOLVE_PY
+    __atomic_store_n(&py_resolved, 1, __ATOMIC_RELEASE);
+    return 1;
+}
+
+/* What robofmu's slave shares with this layer (components/fmi/base.py: _FastShared, the same
+   layout). It owns the struct, the values array and the masks, alive as long as the slave. */
+#define FAST_VERSION 1u
+typedef struct {
+    uint32_t version;                       /* FAST_VERSION */
+    uint32_t size;                          /* sizeof(FastShared) */
+    double* values;                         /* the slave's values: values[vr] */
+    size_t n;                               /* their number */
+    const unsigned char* get_real;          /* per slot: a Real variable */
+    const unsigned char* get_boolean;       /* per slot: a Boolean variable */
+    const unsigned char* set_real;          /* per slot: a Real input */
+    int32_t active;                         /* initialized and not terminated */
+    int32_t dirty;                          /* outputs stale: refresh() before reading them */
+    int32_t inputs_checked;                 /* inputs found finite since they were last set */
+    int32_t call;                           /* the FMI call of a refresh(): FAST_GET_REAL, ... */
+} FastShared;
+
+enum { FAST_GET_REAL = 1, FAST_GET_BOOLEAN = 2 };
+#define FAST_OK 1                           /* refresh() and step() return these bits */
+#define FAST_MESSAGES 2
+
+typedef struct {
+    FastShared* shared;                     /* NULL: not registered, every call forwards */
+    PyObject* refresh;                      /* new references */
+    PyObject* step;
+} Fast;
+
+/* The registration slot of the fmi2Instantiate (or fmi2Reset) under way in this thread. */
+static __thread Fast* registering = NULL;
+
+/* Called by robofmu's slave at the end of its construction (ctypes); 1 if registered. */
+EXPORT int robofmu_fast_register(FastShared* shared, PyObject* refresh, PyObject* step)
+{
+    Fast* slot = registering;
+    if (slot == NULL || slot->shared != NULL || shared == NULL || refresh == NULL || step == NULL)
+        return 0;
+    if (shared->version != FAST_VERSION || shared->size != sizeof *shared
+        || (shared->n > 0 && (shared->values == NULL || shared->get_real == NULL
+                              || shared->get_boolean == NULL || shared->set_real == NULL)))
+        return 0;
+    const char* setting = getenv("ROBOFMU_FMI_FAST_PATH");
+    if (setting != NULL && strcmp(setting, "0") == 0) return 0;
+    if (!python_api()) return 0;
+    PyGILState gil = py.PyGILState_Ensure();
+    py.Py_IncRef(refresh);
+    py.Py_IncRef(step);
+    py.PyGILState_Release(gil);
+    slot->shared = shared;
+    slot->refresh = refresh;
+    slot->step = step;
+    return 1;
+}
+
+static void fast_release(Fast* fast)
+{
+    if (fast->shared == NULL) return;
+    PyGILState gil = py.PyGILState_Ensure();
+    py.Py_DecRef(fast->refresh);
+    py.Py_DecRef(fast->step);
+    py.PyGILState_Release(gil);
+    fast->shared = NULL;
+    fast->refresh = fast->step = NULL;
+}
+
 /* -- one instance ---------------------------------------------------------------------------- */
 typedef struct {
     fmi2CallbackFunctions inner;            /* handed to pythonfmu: its logger is filter() */
@@ -261,6 +411,12 @@ typedef struct {
     size_t n_categories;
     char** categories;
     fmi2Status requested;                   /* the worst status requested during the current call */
+    char* name;                             /* the instance name, for this layer's own messages */
+    Fast fast;                              /* the slave's registration (point 4) */
+    unsigned long long fast_calls;          /* calls the fast path served */
+    int fast_stepped;                       /* a step went the fast path: the two below answer */
+    double last_successful_time;            /* pythonfmu's fmi2LastSuccessfulTime, kept as it does */
+    int wants_to_terminate;                 /* pythonfmu's fmi2Terminated, kept as it does */
 } Instance;
 
 static const char* category_of_status(fmi2Status s)
@@ -345,6 +501,93 @@ static fmi2Status finish(const Instance* in, fmi2Status s)
     if (in == NULL) return fmi2Error;                         \
     in->requested = fmi2OK
 
+/* -- the fast path (point 4 of the header comment) ------------------------------------------- */
+static int fast_on(const Instance* in)
+{
+    return in->fast.shared != NULL && in->fast.shared->active;
+}
+
+/* Whether every value reference names a slot of `mask`. */
+static int fast_all(const FastShared* shared, const unsigned char* mask, const fmi2ValueReference vr[],
+                    size_t nvr)
+{
+    if (nvr > 0 && vr == NULL) return 0;
+    for (size_t k = 0; k < nvr; ++k) {
+        if (vr[k] >= shared->n || !mask[vr[k]]) return 0;
+    }
+    return 1;
+}
+
+/* A Python call's result (a new reference or NULL), with the GIL held: FAST_OK and
+   FAST_MESSAGES bits, or -1 if it raised (cleared: the slave's callables catch everything, so
+   this is a bug) or returned no int. */
+static int fast_result(PyObject* result)
+{
+    long bits = -1;
+    if (result != NULL) {
+        bits = py.PyLong_AsLong(result);
+        py.Py_DecRef(result);
+    }
+    if (result == NULL || (bits == -1 && py.PyErr_Occurred() != NULL)) {
+        py.PyErr_Clear();
+        return -1;
+    }
+    return (int)(bits & (FAST_OK | FAST_MESSAGES));
+}
+
+/* After a fast-path Python call (the GIL released): the messages the slave queued reach the
+   importer through pythonfmu, during this call (its fmi2GetString of nothing reads the slave's
+   log queue into filter()). 1 if the call succeeded. */
+static int fast_done(Instance* in, int bits, const char* call)
+{
+    if (bits < 0) {
+        char text[512];
+        snprintf(text, sizeof text, "%.200s: %s failed: robofmu's slave raised an exception in the FMI "
+                 "fast path (robofmu_fmi2.c)", in->name ? in->name : "", call);
+        filter(in, in->name, fmi2Error, STATUS_CATEGORY, text);
+    }
+    if (bits < 0 || (bits & FAST_MESSAGES)) {
+        fmi2Status s = stock.fmi2GetString(in->stock, NULL, 0, NULL);
+        if (s > in->requested) in->requested = s;
+    }
+    return bits > 0 && (bits & FAST_OK);
+}
+
+/* Outputs up to date before they are read: 1, or 0 if refresh() failed (read zeros). */
+static int fast_refresh(Instance* in, int call)
+{
+    FastShared* shared = in->fast.shared;
+    if (!shared->dirty) return 1;
+    shared->call = call;
+    PyGILState gil = py.PyGILState_Ensure();
+    int bits = fast_result(py.PyObject_CallObject(in->fast.refresh, NULL));
+    py.PyGILState_Release(gil);
+    return fast_done(in, bits, call == FAST_GET_REAL ? "fmi2GetReal" : "fmi2GetBoolean");
+}
+
+/* pythonfmu's fmi2DoStep keeps these from the slave's answer: kept here for every step. */
+static void note_step(Instance* in, fmi2Status stock_status, fmi2Real t, fmi2Real h)
+{
+    if (stock_status == fmi2OK) {
+        in->last_successful_time = t + h;
+    } else if (stock_status == fmi2Discard) {
+        in->last_successful_time = t;
+        in->wants_to_terminate = 1;
+    }
+}
+
+/* Whether instance c is served by the fast path (its slave registered). */
+EXPORT int robofmu_fast_path(fmi2Component c)
+{
+    return c != NULL && ((Instance*)c)->fast.shared != NULL;
+}
+
+/* How many FMI calls of instance c the fast path served. */
+EXPORT unsigned long long robofmu_fast_calls(fmi2Component c)
+{
+    return c != NULL ? ((Instance*)c)->fast_calls : 0;
+}
+
 /* -- FMI 2.0 functions ----------------------------------------------------------------------- */
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
@@ -367,12 +610,21 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     in->inner.logger = filter;
     in->inner.componentEnvironment = in;
     in->logging_on = loggingOn ? 1 : 0;
+    in->name = strdup(instanceName ? instanceName : "");
+    in->last_successful_time = NAN;     /* pythonfmu's start values */
+    Fast pending = {NULL, NULL, NULL};
+    Fast* outer = registering;
+    registering = &pending;             /* the slave registers while pythonfmu constructs it */
     in->stock = stock.fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
                                       &in->inner, visible, fmi2True);
+    registering = outer;
     if (in->stock == NULL) {            /* pythonfmu has logged why (fmi2Fatal: always shown) */
+        fast_release(&pending);
+        free(in->name);
         free(in);
         return NULL;
     }
+    in->fast = pending;
     return in;
 }
 
@@ -380,8 +632,10 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     Instance* in = (Instance*)c;
     if (in == NULL) return;
+    fast_release(&in->fast);            /* before pythonfmu releases the slave */
     stock.fmi2FreeInstance(in->stock);
     free_categories(in);
+    free(in->name);
     free(in);
 }
 
@@ -420,8 +674,21 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefi
 FORWARD0(fmi2EnterInitializationMode)
 FORWARD0(fmi2ExitInitializationMode)
 FORWARD0(fmi2Terminate)
-FORWARD0(fmi2Reset)
 FORWARD0(fmi2CancelStep)
+
+/* pythonfmu constructs the slave anew: it registers anew. */
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    ENTER(c);
+    fast_release(&in->fast);
+    Fast pending = {NULL, NULL, NULL};
+    Fast* outer = registering;
+    registering = &pending;
+    fmi2Status s = stock.fmi2Reset(in->stock);
+    registering = outer;
+    in->fast = pending;
+    return finish(in, s);
+}
 
 #define FORWARD_VALUES(name, type)                                                            \
     EXPORT fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, type value[]) \
@@ -429,14 +696,60 @@ FORWARD0(fmi2CancelStep)
         ENTER(c);                                                                      \
         return finish(in, stock.name(in->stock, vr, nvr, value));                             \
     }
-FORWARD_VALUES(fmi2GetReal, fmi2Real)
 FORWARD_VALUES(fmi2GetInteger, fmi2Integer)
-FORWARD_VALUES(fmi2GetBoolean, fmi2Boolean)
 FORWARD_VALUES(fmi2GetString, fmi2String)
-FORWARD_VALUES(fmi2SetReal, const fmi2Real)
 FORWARD_VALUES(fmi2SetInteger, const fmi2Integer)
 FORWARD_VALUES(fmi2SetBoolean, const fmi2Boolean)
 FORWARD_VALUES(fmi2SetString, const fmi2String)
+
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    ENTER(c);
+    if (fast_on(in) && (value != NULL || nvr == 0) && fast_all(in->fast.shared, in->fast.shared->get_real, vr, nvr)) {
+        in->fast_calls++;
+        const double* values = in->fast.shared->values;
+        if (fast_refresh(in, FAST_GET_REAL)) {
+            for (size_t k = 0; k < nvr; ++k) value[k] = values[vr[k]];
+        } else {
+            for (size_t k = 0; k < nvr; ++k) value[k] = 0.0;     /* as the slave's get_real: no NaN leaves */
+        }
+        return finish(in, fmi2OK);
+    }
+    return finish(in, stock.fmi2GetReal(in->stock, vr, nvr, value));
+}
+
+EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
+{
+    ENTER(c);
+    if (fast_on(in) && (value != NULL || nvr == 0) && fast_all(in->fast.shared, in->fast.shared->get_boolean, vr, nvr)) {
+        in->fast_calls++;
+        const double* values = in->fast.shared->values;
+        int valid = fast_refresh(in, FAST_GET_BOOLEAN);
+        for (size_t k = 0; k < nvr; ++k) value[k] = valid && values[vr[k]] != 0.0;
+        return finish(in, fmi2OK);
+    }
+    return finish(in, stock.fmi2GetBoolean(in->stock, vr, nvr, value));
+}
+
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    ENTER(c);
+    if (fast_on(in) && (value != NULL || nvr == 0) && fast_all(in->fast.shared, in->fast.shared->set_real, vr, nvr)) {
+        in->fast_calls++;
+        FastShared* shared = in->fast.shared;
+        int finite = 1;
+        for (size_t k = 0; k < nvr; ++k) {
+            shared->values[vr[k]] = value[k];
+            finite &= isfinite(value[k]) != 0;
+        }
+        shared->dirty = 1;
+        /* Inputs found finite stay so when only finite values are set: the slave checks them
+           again only after a non-finite one (its own sets clear the flag too). */
+        if (!finite) shared->inputs_checked = 0;
+        return finish(in, fmi2OK);
+    }
+    return finish(in, stock.fmi2SetReal(in->stock, vr, nvr, value));
+}
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)
 {
@@ -502,8 +815,21 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint
                              fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
     ENTER(c);
-    return finish(in, stock.fmi2DoStep(in->stock, currentCommunicationPoint, communicationStepSize,
-                                       noSetFMUStatePriorToCurrentPoint));
+    fmi2Status s;
+    if (fast_on(in)) {
+        in->fast_calls++;
+        in->fast_stepped = 1;
+        PyGILState gil = py.PyGILState_Ensure();
+        int bits = fast_result(py.PyObject_CallFunction(in->fast.step, "dd", currentCommunicationPoint,
+                                                        communicationStepSize));
+        py.PyGILState_Release(gil);
+        s = fast_done(in, bits, "fmi2DoStep") ? fmi2OK : fmi2Discard;   /* pythonfmu's statuses */
+    } else {
+        s = stock.fmi2DoStep(in->stock, currentCommunicationPoint, communicationStepSize,
+                             noSetFMUStatePriorToCurrentPoint);
+    }
+    note_step(in, s, currentCommunicationPoint, communicationStepSize);
+    return finish(in, s);
 }
 
 #define FORWARD_STATUS(name, type)                                                            \
@@ -513,7 +839,26 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint
         return finish(in, stock.name(in->stock, s, value));                                   \
     }
 FORWARD_STATUS(fmi2GetStatus, fmi2Status)
-FORWARD_STATUS(fmi2GetRealStatus, fmi2Real)
 FORWARD_STATUS(fmi2GetIntegerStatus, fmi2Integer)
-FORWARD_STATUS(fmi2GetBooleanStatus, fmi2Boolean)
 FORWARD_STATUS(fmi2GetStringStatus, fmi2String)
+
+/* pythonfmu's answers, kept here once a step went the fast path (pythonfmu did not see it). */
+EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value)
+{
+    ENTER(c);
+    if (in->fast_stepped && s == fmi2LastSuccessfulTime && value != NULL) {
+        *value = in->last_successful_time;
+        return fmi2OK;
+    }
+    return finish(in, stock.fmi2GetRealStatus(in->stock, s, value));
+}
+
+EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value)
+{
+    ENTER(c);
+    if (in->fast_stepped && s == fmi2Terminated && value != NULL) {
+        *value = in->wants_to_terminate ? fmi2True : 0;
+        return fmi2OK;
+    }
+    return finish(in, stock.fmi2GetBooleanStatus(in->stock, s, value));
+}

@@ -176,8 +176,9 @@ class InProcessDiagram:
     def _row(self, out: np.ndarray) -> None:
         k = 0
         for block, slots, count in self._record:
-            block.values.take(slots, out=out[k:k + count])
-            k += count
+            if count:
+                block.values.take(slots, out=out[k:k + count])
+                k += count
 
     # -- sampled (the master's loop) -------------------------------------------------------------------
     def sampled(self, step: float, stop_time: float, start_time: float = 0.0) -> Result:
@@ -194,16 +195,25 @@ class InProcessDiagram:
         times = start_time + h * np.arange(n_steps + 1)
         data = np.empty((n_steps + 1, len(self.columns)))
         blocks = [self.blocks[name] for name in self.order]
+        outputs = []                       # evaluate(t) as one flat list: wires, then outputs
+        for name in self.order:
+            outputs += [(wire.apply, False) for wire in self.early[name]] + [(self.blocks[name].output, True)]
+        outputs += [(wire.apply, False) for wire in self.late]
+        advances = [block.advance for block in blocks]
         t_block = times[0]                 # the blocks' own time: t_k + h after a step, as in a FMU
         wall = _time.perf_counter()
         for k in range(n_steps + 1):
-            self.evaluate(t_block)
+            for op, timed in outputs:
+                if timed:
+                    op(t_block)
+                else:
+                    op()
             self._row(data[k])
             if k == n_steps:
                 break
             t = times[k]
-            for block in blocks:
-                block.advance(t, h)
+            for advance in advances:
+                advance(t, h)
             t_block = t + h
         return Result(times, list(self.columns), data,
                       {"algorithm": "in-process", "step": h, "wall_time": _time.perf_counter() - wall},

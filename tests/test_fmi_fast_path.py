@@ -328,6 +328,29 @@ def test_a_non_finite_input_fails_the_next_step_with_its_message_logging_off(fmu
     assert r.fast_calls == 6
 
 
+def test_reset_constructs_the_slave_anew_and_it_registers_again(fmu_root, raw):
+    path = fmu_root / "chess" / "controller.fmu"
+    r, fresh = raw(path), raw(path)
+    inputs, outputs = r.names("Real", "input"), r.names("Real", "output")
+    values = starts(r, inputs) * 1.01
+
+    def run(instance):
+        instance.initialize()
+        for k in range(5):
+            assert instance.set_real(inputs, values) == OK and instance.step(k * H) == OK
+        return instance.get_real(outputs)
+
+    first = run(r)
+    assert r.call("fmi2Reset") == OK
+    assert r.fast_path
+    calls = r.fast_calls
+    again = run(r)
+    assert r.fast_calls == calls + 11
+    assert again[0] == OK and np.array_equal(bits(again[1]), bits(first[1]))
+    assert np.array_equal(bits(run(fresh)[1]), bits(first[1]))
+    assert r.messages == []
+
+
 # -- FMU state ------------------------------------------------------------------------------------
 @pytest.mark.parametrize("robot, block", HOT)
 @pytest.mark.parametrize("serialized", [False, True], ids=["state", "serialized"])

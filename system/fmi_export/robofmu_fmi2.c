@@ -56,8 +56,8 @@
       new references to the callables until fmi2FreeInstance (fmi2Reset: until the slave is
       constructed anew) releases them, holding the GIL, before pythonfmu frees the slave.
       Then, while the slave is initialized and not terminated:
-      - fmi2SetReal of Real inputs only writes values[vr], marks the outputs stale and the
-        inputs unchecked: no Python at all;
+      - fmi2SetReal of Real inputs only writes values[vr], marks the outputs stale and, if a
+        value written is not finite, the inputs unchecked: no Python at all;
       - fmi2GetReal of Real variables only and fmi2GetBoolean of Boolean variables only call
         refresh() if the outputs are stale (PyGILState_Ensure: the host may hold the GIL, as
         the master's ctypes.PyDLL calls do, or not, as libcosim's threads), then copy the
@@ -68,13 +68,15 @@
         fmi2GetRealStatus (fmi2LastSuccessfulTime) and fmi2GetBooleanStatus (fmi2Terminated)
         would give after it are kept here and answered.
       When the slave says messages wait, this layer calls pythonfmu's fmi2GetString with no
-      value references (the slave's get_string([]) does nothing) before returning: pythonfmu
-      drains the queue into filter() during the current call, so messages are filtered and set
-      the call's status exactly as without the fast path. Every other call, and these with a
-      value reference out of range or of another type or causality (so the error messages are
-      pythonfmu's and the slave's), before initialization, after fmi2Terminate, and in an
-      instance that did not register, goes to pythonfmu as before. robofmu_fast_path(c) says
-      whether an instance registered, robofmu_fast_calls(c) how many calls it served.
+      value references (the slave's get_string([]) does nothing; pythonfmu releases the
+      strings an earlier fmi2GetString returned, which FMI lets the next call do) before
+      returning: pythonfmu drains the queue into filter() during the current call, so messages
+      are filtered and set the call's status exactly as without the fast path. Every other
+      call, and these with a value reference out of range or of another type or causality (so
+      the error messages are pythonfmu's and the slave's), before initialization, after
+      fmi2Terminate, and in an instance that did not register, goes to pythonfmu as before.
+      robofmu_fast_path(c) says whether an instance registered, robofmu_fast_calls(c) how many
+      calls it served.
 
    Everything else is pythonfmu's, fmi2Fatal after a Python exception included (robofmu's
    slave lets none reach it: it fails calls through point 1). Only the fast path (point 4)

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from typing import Callable
@@ -125,8 +127,35 @@ def execute(client, system, runs: list[tuple[int, dict]], stop_time, step, keep_
     """Submit every ``(index, values)`` run and hand each record to ``on_record`` as it arrives.
 
     A run whose task fails without a record (its worker died twice: KilledWorker) becomes a
-    failed record naming that. KeyboardInterrupt cancels the runs not finished and propagates.
+    failed record naming that. KeyboardInterrupt cancels the runs not finished and propagates;
+    a Ctrl-C whose KeyboardInterrupt some library code swallowed still stops the sweep at the
+    next record (the SIGINT handler also sets a flag, checked after every record).
     """
+    with _interrupt_flag() as interrupted:
+        _execute(client, system, runs, stop_time, step, keep_folder, on_record, tag, interrupted)
+
+
+@contextmanager
+def _interrupt_flag():
+    """A flag SIGINT sets (besides raising KeyboardInterrupt, as Python's own handler does);
+    installed in the main thread only, the previous handler restored after."""
+    flag = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+
+    def on_sigint(signum, frame):
+        flag.set()
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _execute(client, system, runs, stop_time, step, keep_folder, on_record, tag, interrupted) -> None:
     from distributed import as_completed
 
     from .worker import run_one
@@ -150,6 +179,8 @@ def execute(client, system, runs: list[tuple[int, dict]], stop_time, step, keep_
                 record = dict(values, status="failed", message=reason)
             future.release()
             on_record(index, record)
+            if interrupted.is_set():
+                raise KeyboardInterrupt
     except BaseException:
         client.cancel(list(futures), force=True)
         raise

@@ -38,18 +38,10 @@ def lspb(x0: np.ndarray, x1: np.ndarray, T: float, t: float, cruise_factor: floa
     -------
     x, xd, xdd : ndarray, shape (m,)
     """
-    x0 = np.asarray(x0, dtype=float)
-    dx = np.asarray(x1, dtype=float) - x0
-    t = min(max(t, 0.0), T)
-    V = cruise_factor * dx / T
-    tb = T - T / cruise_factor
-    a = V / tb
-    if t < tb:
-        return x0 + 0.5 * a * t * t, a * t, a.copy()
-    if t <= T - tb:
-        return x0 + 0.5 * a * tb * tb + V * (t - tb), V.copy(), np.zeros_like(dx)
-    r = T - t
-    return x0 + dx - 0.5 * a * r * r, a * r, -a
+    piece = _LSPBPiece(x0, x1, T, cruise_factor)
+    x, xd, xdd = np.empty_like(piece.x0), np.empty_like(piece.x0), np.empty_like(piece.x0)
+    piece.evaluate_into(t, x, xd, xdd)
+    return x, xd, xdd
 
 
 class _LSPBPiece:
@@ -421,12 +413,15 @@ class Circle:
         self.dim = 2 + len(self.offset)
         tb = self.duration * (1.0 - 1.0 / self.cruise_factor)
         self.breakpoints = np.unique([0.0, tb, self.duration - tb, self.duration])
+        self._phase = _LSPBPiece(np.zeros(1), np.full(1, 2.0 * np.pi), self.duration, self.cruise_factor)
+        self._phase_values = (np.zeros(1), np.zeros(1), np.zeros(1))
 
     def phase(self, t: float) -> tuple[float, float, float]:
         """phi (rad), phid (rad/s), phidd (rad/s^2) at ``t``: LSPB from 0 to 2 pi, at rest outside."""
         if t < 0.0 or t >= self.duration:
             return (0.0 if t < 0.0 else 2.0 * np.pi), 0.0, 0.0
-        p, v, a = lspb(np.zeros(1), np.full(1, 2.0 * np.pi), self.duration, t, self.cruise_factor)
+        p, v, a = self._phase_values
+        self._phase.evaluate_into(t, p, v, a)
         return float(p[0]), float(v[0]), float(a[0])
 
     def evaluate(self, t: float, snap: bool = True):

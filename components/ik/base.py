@@ -84,7 +84,6 @@ class IKSolver:
         if rows != robot.n or len(self.constraint_values) != len(self.constraint_rows):
             raise ValueError(f"IK solver {self.kind!r}: {robot.m} task coordinates and "
                              f"{len(self.constraint_rows)} constraints for {robot.n} joints")
-        self._padding = np.zeros(len(self.constraint_rows))
         n, m = robot.n, robot.m
         self._A = np.zeros((n, n))                 # A = [J; C]: the constraint rows set once
         self._A[m:] = self.constraint_rows

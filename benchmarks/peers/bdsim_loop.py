@@ -72,6 +72,8 @@ from pathlib import Path
 
 import numpy as np
 
+import reference          # benchmarks/peers/reference.py, beside this file
+
 VARIANTS = {
     "mdh-rk4": ("mdh", "RK4", "blocks",
                 "trajectory, IK (FUNCTION blocks), sampled computed torque, grip ZOH, FDYN plant; "
@@ -95,96 +97,29 @@ DEFAULT_VARIANT = "mdh-rk4"
 
 #: The derived DH robot must reproduce the URDF robot's FK, M(q) and rne to this.
 DH_TOLERANCE = 1e-9
-AXIS_TOLERANCE = 1e-9
 
 
 # -- the reference: LSPB through waypoints (robofmu components/trajectory.py) -------------------------
-class Waypoints:
-    def __init__(self, spec: dict):
-        w = np.asarray(spec["waypoints"], float)
-        d = np.asarray(spec["durations"], float)
-        self.pause = float(spec["pause"])
-        self.cf = float(spec["cruise_factor"])
-        self.breakpoints = np.asarray(spec["breakpoints"], float)
-        self.tol = float(spec["snap_tolerance"])
-        self.grip_close = float(spec["grip_close"])
-        self.grip_open = float(spec["grip_open"])
-        self.final = w[-1].copy()
-        self.dim = w.shape[1]
-        segments, t = [], 0.0
-        for i in range(len(d)):
-            segments.append((t, t + d[i], w[i], w[i + 1], True))
-            t += d[i]
-            if i < len(d) - 1 and self.pause > 0.0:
-                segments.append((t, t + self.pause, w[i + 1], w[i + 1], False))
-                t += self.pause
-        self.segments = segments
-        self.starts = np.array([s[0] for s in segments])
-        self.duration = t
-
-    def snap(self, t: float) -> float:
-        b = self.breakpoints
-        k = int(np.searchsorted(b, t))
-        for j in (k - 1, k):
-            if 0 <= j < len(b) and abs(b[j] - t) <= self.tol:
-                return float(b[j])
-        return t
-
-    def lspb(self, x0, x1, T, t):
-        dx = x1 - x0
-        t = min(max(t, 0.0), T)
-        V = self.cf * dx / T
-        tb = T - T / self.cf
-        a = V / tb
-        if t < tb:
-            return x0 + 0.5 * a * t * t, a * t, a.copy()
-        if t <= T - tb:
-            return x0 + 0.5 * a * tb * tb + V * (t - tb), V.copy(), np.zeros_like(dx)
-        r = T - t
-        return x0 + dx - 0.5 * a * r * r, a * r, -a
+class Waypoints(reference.Waypoints):
+    """benchmarks/peers/reference.py's trajectory (shared with the pydrake peer), its gripper as
+    0/1 for a bdsim signal."""
 
     def __call__(self, t: float):
-        """x, xd, xdd (m, m/s, m/s2) and grip (0/1) at t (s), evaluated at a breakpoint within
-        snap_tolerance, as robofmu's sampled block does."""
-        t = self.snap(float(t))
-        closed = t >= self.grip_close and not (t >= self.grip_open and self.grip_open > self.grip_close)
-        grip = 1.0 if closed else 0.0
-        z = np.zeros(self.dim)
-        if t >= self.duration:
-            return self.final.copy(), z, z.copy(), grip
-        i = max(int(np.searchsorted(self.starts, t, side="right")) - 1, 0)
-        start, end, x0, x1, move = self.segments[i]
-        if not move:
-            return x0.copy(), z, z.copy(), grip
-        x, xd, xdd = self.lspb(x0, x1, end - start, t - start)
-        return x, xd, xdd, grip
+        x, xd, xdd, grip = self.evaluate(t)
+        return x, xd, xdd, 1.0 if grip else 0.0
 
 
 # -- the IK: base rotation + three pitch joints, tool pitch held (components/ik/closed_form.py) ---------
 class PitchElbowIK:
     def __init__(self, spec: dict, robot, tcp: str):
-        self.a1, self.a2, self.a3, self.a4 = (float(spec[k]) for k in ("a1", "a2", "a3", "a4"))
-        self.phi = float(spec["tool_pitch"])
-        self.sign = float(spec["elbow_sign"])
+        self.spec = spec
         self.qd_limit = np.asarray(spec["qd_limit"], float)
         self.robot = robot
         self.tcp = next(l for l in robot.links if l.name == tcp)
         self.C = np.array([[0.0, 1.0, 1.0, 1.0]])
 
     def position(self, x):
-        px, py, pz = float(x[0]), float(x[1]), float(x[2])
-        p = math.hypot(px, py)
-        if p < AXIS_TOLERANCE:
-            raise ValueError(f"IK: target {x} lies on the base axis")
-        pw = p - self.a4 * math.cos(self.phi)
-        r = pz - self.a4 * math.sin(self.phi) - self.a1
-        d = math.hypot(pw, r)
-        c = (self.a2 ** 2 + d * d - self.a3 ** 2) / (2.0 * self.a2 * d) if d > 0 else 2.0
-        if not abs(c) < 1.0 - 1e-12:
-            raise ValueError(f"IK: target {x} is out of reach")
-        q2 = math.atan2(r, pw) + self.sign * math.acos(c)
-        q23 = math.atan2(r - self.a2 * math.sin(q2), pw - self.a2 * math.cos(q2))
-        return np.array([math.atan2(py, px), q2, q23 - q2, self.phi - q23])
+        return reference.pitch_elbow_position(self.spec, x)
 
     def __call__(self, x, xd, xdd):
         """q, qd, qdd of the reference. robofmu holds its last solution outside the workspace;

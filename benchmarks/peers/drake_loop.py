@@ -38,7 +38,6 @@ robofmu's column names.
 from __future__ import annotations
 
 import argparse
-import bisect
 import importlib.metadata
 import json
 import math
@@ -48,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from reference import Unreachable, Waypoints, pitch_elbow_position   # beside this file
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
@@ -69,8 +69,6 @@ VARIANTS = {
 }
 DEFAULT_VARIANT = "rk3"
 
-#: Closer than this (m) to the base axis q1 is undefined (robofmu's AXIS_TOLERANCE).
-AXIS_TOLERANCE = 1e-9
 
 
 # -- the arm ---------------------------------------------------------------------------------------
@@ -121,69 +119,7 @@ def _root_link(urdf: str) -> str:
     return roots[0]
 
 
-# -- the trajectory and IK -------------------------------------------------------------------------
-class Trajectory:
-    """robofmu's WaypointTrajectory: LSPB moves through waypoints with pauses, and the gripper."""
-
-    def __init__(self, t: dict):
-        self.w = np.asarray(t["waypoints"], dtype=float)
-        self.d = np.asarray(t["durations"], dtype=float)
-        self.pause, self.cf = float(t["pause"]), float(t["cruise_factor"])
-        self.breaks = [float(b) for b in t["breakpoints"]]
-        self.tol = float(t["snap_tolerance"])
-        self.close, self.open = float(t["grip_close"]), float(t["grip_open"])
-        self.dim = self.w.shape[1]
-        segments, s, k = [], 0.0, len(self.d)
-        for i in range(k):
-            segments.append((s, s + self.d[i], self.w[i], self.w[i + 1], True))
-            s += self.d[i]
-            if i < k - 1 and self.pause > 0.0:
-                segments.append((s, s + self.pause, self.w[i + 1], self.w[i + 1], False))
-                s += self.pause
-        self.segments, self.duration = segments, s
-        self.starts = [seg[0] for seg in segments]
-        self.zero = np.zeros(self.dim)
-
-    def snap(self, t: float) -> float:
-        """t moved onto a breakpoint within the snap tolerance."""
-        b = self.breaks
-        k = bisect.bisect_left(b, t)
-        for j in (k - 1, k):
-            if 0 <= j < len(b) and abs(b[j] - t) <= self.tol:
-                return b[j]
-        return t
-
-    def lspb(self, x0, x1, T, t):
-        dx = x1 - x0
-        t = min(max(t, 0.0), T)
-        V = self.cf * dx / T
-        tb = T - T / self.cf
-        a = V / tb
-        if t < tb:
-            return x0 + 0.5 * a * t * t, a * t, a
-        if t <= T - tb:
-            return x0 + 0.5 * a * tb * tb + V * (t - tb), V, self.zero
-        r = T - t
-        return x0 + dx - 0.5 * a * r * r, a * r, -a
-
-    def evaluate(self, t: float):
-        """(x, xd, xdd) at t, and the gripper (closed on [close, open))."""
-        t = self.snap(t)
-        grip = t >= self.close and not (t >= self.open and self.open > self.close)
-        if t >= self.duration:
-            return self.w[-1], self.zero, self.zero, grip
-        i = max(bisect.bisect_right(self.starts, t) - 1, 0)
-        start, end, x0, x1, move = self.segments[i]
-        if not move:
-            return x0, self.zero, self.zero, grip
-        x, xd, xdd = self.lspb(x0, x1, end - start, t - start)
-        return x, xd, xdd, grip
-
-
-class Unreachable(ValueError):
-    pass
-
-
+# -- the trajectory and IK: benchmarks/peers/reference.py, shared with the bdsim peer ---------------
 class Reference(LeafSystem):
     """Trajectory + pitch-elbow IK: output ``reference`` = [q_ref, qd_ref, qdd_ref, grip] at the
     context's time (no state; robofmu's hold of the last valid solution outside the workspace is
@@ -191,10 +127,8 @@ class Reference(LeafSystem):
 
     def __init__(self, spec: dict, arm: Arm):
         super().__init__()
-        self.traj = Trajectory(spec["trajectory"])
-        ik = spec["ik"]
-        self.a1, self.a2, self.a3, self.a4 = (float(ik[k]) for k in ("a1", "a2", "a3", "a4"))
-        self.phi, self.sign = float(ik["tool_pitch"]), float(ik["elbow_sign"])
+        self.traj = Waypoints(spec["trajectory"])
+        ik = self.ik = spec["ik"]
         self.qd_limit = np.asarray(ik["qd_limit"], dtype=float)
         self.arm, self.n = arm, arm.n
         self.kin = arm.plant.CreateDefaultContext()           # kinematics only: J, Jdot qd
@@ -208,20 +142,7 @@ class Reference(LeafSystem):
                                      prerequisites_of_calc={self.time_ticket()})
 
     def position(self, x):
-        px, py, pz = float(x[0]), float(x[1]), float(x[2])
-        p = math.hypot(px, py)
-        if p < AXIS_TOLERANCE:
-            raise Unreachable(f"target {x} lies on the base axis")
-        phi = self.phi
-        pw = p - self.a4 * math.cos(phi)
-        r = pz - self.a4 * math.sin(phi) - self.a1
-        d = math.hypot(pw, r)
-        c = (self.a2 ** 2 + d * d - self.a3 ** 2) / (2.0 * self.a2 * d) if d > 0 else 2.0
-        if not abs(c) < 1.0 - 1e-12:
-            raise Unreachable(f"target {x} is out of reach")
-        q2 = math.atan2(r, pw) + self.sign * math.acos(c)
-        q23 = math.atan2(r - self.a2 * math.sin(q2), pw - self.a2 * math.cos(q2))
-        return np.array([math.atan2(py, px), q2, q23 - q2, phi - q23])
+        return pitch_elbow_position(self.ik, x)
 
     def rates(self, q, xd, xdd):
         """qd = A^-1 [xd; 0], qdd = A^-1 [xdd - Jdot qd; 0], A = [J; C] (J, Jdot qd from Drake)."""
@@ -371,7 +292,7 @@ def build(spec: dict, variant: str):
     return diagram, simulator, arm, plant_context, reference, controller
 
 
-def segments(spec: dict, traj: Trajectory):
+def segments(spec: dict, traj: Waypoints):
     """[(k, payload mass from step k on)]: the steps at which the gripper changes, as the master
     samples it (at t_k = k h)."""
     h, n_steps, m = float(spec["h"]), int(spec["n_steps"]), float(spec["plant"]["payload_mass"])

@@ -53,8 +53,9 @@ class ComputedTorque:
         np.subtract(q_ref, q, out=e)
         np.multiply(e, self.kp, out=e)
         np.add(u, e, out=u)
-        np.multiply(self.z, self.ki, out=e)
-        np.add(u, e, out=u)
+        if self.ki != 0.0:                           # PD: u + 0 z is u
+            np.multiply(self.z, self.ki, out=e)
+            np.add(u, e, out=u)
         self.robot.inverse_dynamics_into(q, qd, u, out)    # M(q) u + N(q, qd) in one pass (RNEA)
 
     def advance(self, q_ref, q, h: float) -> None:

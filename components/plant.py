@@ -40,12 +40,17 @@ class Plant:
         if self.x.shape != (2 * self.n,) or not np.all(np.isfinite(self.x)):
             raise ValueError(f"q0/qd0: need {self.n} finite values each")
         self.grip = False
-        size = 2 * self.n
-        self._stages = np.zeros((4, size))          # RK4's k1 .. k4
-        self._work, self._stage, self._total = np.zeros(size), np.zeros(size), np.zeros(size)
+        n, size = self.n, 2 * self.n
+        # RK4's four stages, a row each: (q, qd, qdd) of the stage's state. k_i = (qd, qdd) is then
+        # the row's last 2n values, a view: no copy of qd into k. Row 0's state is the work state.
+        self._rows = np.zeros((4, 3 * n))
+        self._states = [row[:size] for row in self._rows]
+        self._slopes = self._rows[:, n:]                       # k1 .. k4, shape (4, 2n)
+        self._parts = [(row[:n], row[n:size], row[size:]) for row in self._rows]     # q, qd, qdd
+        self._weights = np.array([[1.0], [2.0], [2.0], [1.0]])  # k1 + 2 k2 + 2 k3 + k4
+        self._weighted = np.zeros((4, size))
+        self._total = np.zeros(size)
         self._ones = np.ones(size)
-        n = self.n                                  # (q, qd) views of the work state, the stage, total, k1 .. k4
-        self._halves = [(b[:n], b[n:]) for b in (self._work, self._stage, self._total, *self._stages)]
 
     @property
     def q(self) -> np.ndarray:
@@ -86,10 +91,11 @@ class Plant:
         substeps = max(1, math.ceil(h / self.max_substep - 1e-9))
         dt = h / substeps
         half, sixth = 0.5 * dt, dt / 6.0
-        k1, k2, k3, k4 = self._stages
-        x, stage, total = self._work, self._stage, self._total
-        (xq, xv), (sq, sv) = self._halves[0], self._halves[1]
-        (k1q, k1v), (k2q, k2v), (k3q, k3v), (k4q, k4v) = self._halves[3:]
+        x, s2, s3, s4 = self._states
+        (xq, xv, a1), (q2, v2, a2), (q3, v3, a3), (q4, v4, a4) = self._parts
+        k1, k2, k3, _ = self._slopes
+        weights, weighted, total = self._weights, self._weighted, self._total
+        multiply, add = np.multiply, np.add
         if f_ext is None:
             dynamics = self.robot.forward_dynamics_into
         else:
@@ -98,28 +104,23 @@ class Plant:
             def dynamics(q, qd, tau, out):
                 out[:] = wrench(q, qd, tau, f_ext)
         x[:] = self.x
-        for _ in range(substeps):                    # k = (qd, qdd) at the stage's state
-            k1q[:] = xv
-            dynamics(xq, xv, tau, k1v)
-            np.multiply(k1, half, out=stage)
-            np.add(x, stage, out=stage)
-            k2q[:] = sv
-            dynamics(sq, sv, tau, k2v)
-            np.multiply(k2, half, out=stage)
-            np.add(x, stage, out=stage)
-            k3q[:] = sv
-            dynamics(sq, sv, tau, k3v)
-            np.multiply(k3, dt, out=stage)
-            np.add(x, stage, out=stage)
-            k4q[:] = sv
-            dynamics(sq, sv, tau, k4v)
-            np.multiply(k2, 2.0, out=total)          # (dt/6) (k1 + 2 k2 + 2 k3 + k4), left to right
-            np.add(k1, total, out=total)
-            np.multiply(k3, 2.0, out=stage)
-            np.add(total, stage, out=total)
-            np.add(total, k4, out=total)
-            np.multiply(total, sixth, out=total)
-            np.add(x, total, out=x)
+        for _ in range(substeps):
+            dynamics(xq, xv, tau, a1)                # k1 = (qd, qdd) at x
+            multiply(k1, half, s2)
+            add(x, s2, s2)                           # x + (dt/2) k1
+            dynamics(q2, v2, tau, a2)
+            multiply(k2, half, s3)
+            add(x, s3, s3)
+            dynamics(q3, v3, tau, a3)
+            multiply(k3, dt, s4)
+            add(x, s4, s4)
+            dynamics(q4, v4, tau, a4)
+            # (dt/6) (k1 + 2 k2 + 2 k3 + k4), summed left to right (a reduction over the rows
+            # adds them in row order), then x += it: integrators.rk4's arithmetic
+            multiply(self._slopes, weights, weighted)
+            add.reduce(weighted, axis=0, out=total)
+            multiply(total, sixth, total)
+            add(x, total, x)
         if not math.isfinite(x.dot(self._ones)):      # nan and inf propagate through the sum
             bad = np.flatnonzero(~np.isfinite(x))
             if bad.size:

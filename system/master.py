@@ -356,9 +356,9 @@ class Master:
             # topological in the feedthrough graph) and are set after the pass, before doStep.
             links = [link for link in self.links if link.target == name]
             early = _Inputs([link for link in links if rank[link.source] < rank[name]], variables,
-                            real_index, boolean_index)
+                            real_index, boolean_index, self.real_signals)
             late = _Inputs([link for link in links if rank[link.source] >= rank[name]], variables,
-                           real_index, boolean_index)
+                           real_index, boolean_index, self.real_signals)
             self.ports[name] = (get_real, get_boolean, early, late)
         self.real_names = [f"{block}.{v.name}" for block, v in real_outputs]
         self.boolean_names = [f"{block}.{v.name}" for block, v in boolean_outputs]
@@ -411,6 +411,7 @@ class Master:
         interrupted = [False] if interrupted is None else interrupted
         real_signals, boolean_signals = self.real_signals, self.boolean_signals
         n_real = len(real_signals)
+        ones = np.ones(n_real)              # signals . ones: nan and inf propagate, a sum at BLAS speed
         row = np.zeros(n_real + len(boolean_signals))
         record_all = np.array_equal(self.keep, np.arange(len(row)))
         recorded = np.empty((n_steps + 1, len(self.keep)))
@@ -424,7 +425,7 @@ class Master:
                 t = times[k]
                 for op in (first if k == 0 else exchange):    # Jacobi, too, starts consistent
                     op()
-                if not math.isfinite(real_signals.sum()) and not np.isfinite(real_signals).all():
+                if not math.isfinite(real_signals.dot(ones)) and not np.isfinite(real_signals).all():
                     index = int(np.flatnonzero(~np.isfinite(real_signals))[0])
                     bad = self.real_names[index]
                     raise _Failure(bad.split(".")[0], f"output {bad} is not finite "
@@ -504,41 +505,49 @@ class _Port:
 
     def __init__(self, references: list[int], buffer: np.ndarray, ctype):
         self.count = len(references)
-        self.references = (ctypes.c_uint * max(self.count, 1))(*references)
+        self.size = ctypes.c_size_t(self.count)         # the call's nvr, converted once
+        self.references = (fmi2ValueReference * max(self.count, 1))(*references)
         self.buffer = buffer
         self.values = (ctype * self.count).from_buffer(buffer) if self.count else None
 
 
 class _Inputs:
     """The wired inputs of one block fed in one phase: ports, and where in the signal vectors
-    their values come from."""
+    their values come from. Real inputs whose sources are consecutive signals (a wired vector)
+    are set straight from the signal vector (``real_in_place``: the port's buffer is a view of
+    it), others through a buffer they are gathered into."""
 
-    def __init__(self, links: list[Link], variables: dict, real_index: dict, boolean_index: dict):
+    def __init__(self, links: list[Link], variables: dict, real_index: dict, boolean_index: dict,
+                 real_signals: np.ndarray):
         real_links = [link for link in links if variables[link.input].type == "Real"]
         boolean_links = [link for link in links if variables[link.input].type == "Boolean"]
-        self.real = _Port([variables[link.input].valueReference for link in real_links],
-                          np.zeros(len(real_links)), ctypes.c_double)
-        self.boolean = _Port([variables[link.input].valueReference for link in boolean_links],
-                             np.zeros(len(boolean_links), dtype=np.int32), ctypes.c_int)
         self.real_sources = np.array([real_index[(link.source, link.output)] for link in real_links],
                                      dtype=np.intp)
+        sources = self.real_sources
+        self.real_in_place = bool(sources.size) and bool(np.all(sources == sources[0] + np.arange(sources.size)))
+        buffer = (real_signals[sources[0]:sources[0] + sources.size] if self.real_in_place
+                  else np.zeros(len(real_links)))
+        self.real = _Port([variables[link.input].valueReference for link in real_links], buffer, ctypes.c_double)
+        self.boolean = _Port([variables[link.input].valueReference for link in boolean_links],
+                             np.zeros(len(boolean_links), dtype=np.int32), ctypes.c_int)
         self.boolean_sources = np.array([boolean_index[(link.source, link.output)] for link in boolean_links],
                                         dtype=np.intp)
         self.last_booleans = b""          # bytes of the Boolean values last set (none yet)
 
 
-_VALUES = ctypes.POINTER(fmi2ValueReference)
-_PROTOTYPES = {     # FMI 2.0 fmi2FunctionTypes.h
-    "fmi2GetReal": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Real)],
-    "fmi2SetReal": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Real)],
-    "fmi2GetBoolean": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Boolean)],
-    "fmi2SetBoolean": [fmi2Component, _VALUES, ctypes.c_size_t, ctypes.POINTER(fmi2Boolean)],
-    "fmi2DoStep": [fmi2Component, fmi2Real, fmi2Real, fmi2Boolean],
-}
+# The calls' C types (FMI 2.0 fmi2FunctionTypes.h), which every argument is made as once:
+#   fmi2GetReal / fmi2SetReal (fmi2Component, const fmi2ValueReference*, size_t, fmi2Real*)
+#   fmi2GetBoolean / fmi2SetBoolean (fmi2Component, const fmi2ValueReference*, size_t, fmi2Boolean*)
+#   fmi2DoStep (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean)
 
 
 class _Fmi2Functions:
     """The FMI 2.0 functions of the hot loop for one instance, bound once.
+
+    Called with arguments already of their C types (listed above, made once per port: the
+    component as ``c_void_p``, counts as ``c_size_t``, arrays, ``c_double`` times whose value
+    is set per step): ctypes then converts nothing per call (without ``argtypes`` it would
+    pass a Python int as a C int, so nothing else may be passed), half the cost of a call.
 
     Taken from the FMU's shared library as fmpy loaded it: the ``dll`` (a ``ctypes.CDLL``) and
     ``component`` attributes of fmpy's ``FMU2Slave`` (public attributes, not fmpy's private
@@ -565,7 +574,7 @@ class _Fmi2Functions:
                 "`dll` (ctypes.CDLL) and instance `component`; the master binds fmi2GetReal, "
                 "fmi2SetReal, fmi2GetBoolean, fmi2SetBoolean and fmi2DoStep from them (written "
                 "for fmpy 0.3.x)")
-        self.component = component
+        self.component = fmi2Component(component)
         library = ctypes.PyDLL(library._name, handle=library._handle)
         self.get_real = _bind(library, "fmi2GetReal")
         self.set_real = _bind(library, "fmi2SetReal")
@@ -575,8 +584,7 @@ class _Fmi2Functions:
 
 
 def _bind(library: ctypes.CDLL, name: str):
-    function = library[name]
-    function.argtypes = _PROTOTYPES[name]
+    function = library[name]            # no argtypes: see _Fmi2Functions (the types: _PROTOTYPES)
     function.restype = fmi2Status
     return function
 
@@ -597,7 +605,7 @@ def _status(status: int) -> str:
 
 def _get(function, component, port: _Port, name: str, call: str):
     """A closure reading one block's outputs of one type into the signal vector."""
-    def op(function=function, component=component, references=port.references, count=port.count,
+    def op(function=function, component=component, references=port.references, count=port.size,
            values=port.values):
         status = function(component, references, count, values)
         if status > 1:
@@ -610,10 +618,17 @@ def _sets(functions: _Fmi2Functions, inputs: _Inputs, real_signals: np.ndarray,
     """Closures setting one block's inputs (of one phase) from the signal vectors."""
     ops = []
     real, boolean = inputs.real, inputs.boolean
-    if real.count:
+    if real.count and inputs.real_in_place:
+        def set_real(function=functions.set_real, component=functions.component,
+                     references=real.references, count=real.size, values=real.values):
+            status = function(component, references, count, values)
+            if status > 1:
+                raise _Failure(name, _status(status), "fmi2SetReal")
+        ops.append(set_real)
+    elif real.count:
         def set_real(take=real_signals.take, sources=inputs.real_sources, buffer=real.buffer,
                      function=functions.set_real, component=functions.component,
-                     references=real.references, count=real.count, values=real.values):
+                     references=real.references, count=real.size, values=real.values):
             take(sources, out=buffer)
             status = function(component, references, count, values)
             if status > 1:
@@ -622,7 +637,7 @@ def _sets(functions: _Fmi2Functions, inputs: _Inputs, real_signals: np.ndarray,
     if boolean.count:
         def set_boolean(take=boolean_signals.take, sources=inputs.boolean_sources, buffer=boolean.buffer,
                         function=functions.set_boolean, component=functions.component,
-                        references=boolean.references, count=boolean.count, values=boolean.values):
+                        references=boolean.references, count=boolean.size, values=boolean.values):
             take(sources, out=buffer)
             now = buffer.tobytes()
             if now != inputs.last_booleans:       # discrete inputs: set only when they change
@@ -636,8 +651,11 @@ def _sets(functions: _Fmi2Functions, inputs: _Inputs, real_signals: np.ndarray,
 
 def _step(functions: _Fmi2Functions, name: str):
     """A closure calling one block's fmi2DoStep(t, h)."""
-    def op(t, h, function=functions.do_step, component=functions.component):
-        status = function(component, t, h, fmi2True)
+    def op(t, h, function=functions.do_step, component=functions.component, time=fmi2Real(),
+           step=fmi2Real(), no_set_state_before=fmi2Boolean(fmi2True)):
+        time.value = t
+        step.value = h
+        status = function(component, time, step, no_set_state_before)
         if status > 1:
             raise _Failure(name, _status(status), "fmi2DoStep")
     return op

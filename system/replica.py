@@ -129,7 +129,7 @@ class InProcessDiagram:
             phase[link.target].append(link)
         self.early = {name: self._wires(links) for name, links in early.items()}
         self.late = [w for name in self.order for w in self._wires(late[name])]
-        self.columns, self._record = self._recorded()
+        self.columns = self._recorded()
 
     def _wires(self, links) -> list[_Wire]:
         by_source: dict[str, list] = {}
@@ -143,7 +143,8 @@ class InProcessDiagram:
         return wires
 
     def _recorded(self):
-        """Every output of every block (Reals, then Booleans, as the master records them)."""
+        """Every output of every block (Reals, then Booleans, as the master records them): their
+        column names, and where :meth:`_row` gathers them from."""
         columns, record, self.units = [], [], {}
         for kind in ("Real", "Boolean"):
             for name in self.order:
@@ -152,8 +153,12 @@ class InProcessDiagram:
                 columns += [f"{name}.{block.variables[k].name}" for k in slots]
                 self.units.update({f"{name}.{block.variables[k].name}": block.variables[k].unit
                                    for k in slots if block.variables[k].unit})
-                record.append((block, np.array(slots, dtype=np.intp), len(slots)))
-        return columns, record
+                record.append((name, slots))
+        self._sources = [self.blocks[name].values for name in self.order]   # never replaced
+        offsets = dict(zip(self.order, np.cumsum([0] + [len(v) for v in self._sources])))
+        self._stacked = np.zeros(sum(len(v) for v in self._sources))
+        self._gather = np.array([offsets[name] + k for name, slots in record for k in slots], dtype=np.intp)
+        return columns
 
     # -- shared pieces -------------------------------------------------------------------------------
     def configure(self) -> None:
@@ -174,11 +179,8 @@ class InProcessDiagram:
             wire.apply()
 
     def _row(self, out: np.ndarray) -> None:
-        k = 0
-        for block, slots, count in self._record:
-            if count:
-                block.values.take(slots, out=out[k:k + count])
-                k += count
+        np.concatenate(self._sources, out=self._stacked)      # every block's values, then one gather
+        self._stacked.take(self._gather, out=out)
 
     # -- sampled (the master's loop) -------------------------------------------------------------------
     def sampled(self, step: float, stop_time: float, start_time: float = 0.0) -> Result:

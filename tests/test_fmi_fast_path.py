@@ -159,6 +159,17 @@ def bits(values) -> np.ndarray:
     return np.asarray(values, dtype=np.float64).view(np.uint64)
 
 
+def frames_dropped(messages) -> list:
+    """The messages with a traceback's frames left out (its first and last line kept): the two
+    paths reach the block's code through different wrapper frames."""
+    kept = []
+    for status, category, message in messages:
+        head, mark, trace = message.partition("Traceback (most recent call last):")
+        lines = trace.strip().splitlines()
+        kept.append((status, category, head + mark + (lines[-1] if lines else "")))
+    return kept
+
+
 def starts(r: Raw, names) -> np.ndarray:
     return np.array([float(r.variables[n].start) for n in names])
 
@@ -219,6 +230,7 @@ def test_set_get_round_trip_is_exact(fmu_root, raw, robot, block, rng):
     assert r.fast_calls == 3
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")    # an overflow is the FMU's message, not the host's warning
 @pytest.mark.parametrize("robot, block", HOT + robot_blocks(kinds=("ik",)))
 def test_a_twin_without_the_fast_path_gives_the_same_bits_statuses_and_messages(fmu_root, raw, robot, block, rng):
     path = fmu_root / robot / f"{block}.fmu"
@@ -234,7 +246,7 @@ def test_a_twin_without_the_fast_path_gives_the_same_bits_statuses_and_messages(
         if k == 10:
             values[-1] = float("nan")                        # held outputs, then a refused step
         if k == 20:
-            values[0] = 1e300                                # an output that would not be finite
+            values[0] = 1e308                                # an output that would not be finite
         results = []
         for r in (fast, slow):
             got = [r.set_real(inputs, values), r.get_real(reals)]
@@ -252,8 +264,10 @@ def test_a_twin_without_the_fast_path_gives_the_same_bits_statuses_and_messages(
             assert frest[0] == srest[0], k
         if frest[-2] == OK:
             t += H
-    assert fast.messages == slow.messages
+    assert frames_dropped(fast.messages) == frames_dropped(slow.messages)
     assert any(s == "ERROR" and "is not finite; step refused" in m for s, _, m in fast.messages)
+    if block == "controller":       # found by the library's check of the outputs: held, reported
+        assert any(s == "ERROR" and "would be" in m and "outputs held" in m for s, _, m in fast.messages)
     assert fast.real_status(fmi2LastSuccessfulTime) == slow.real_status(fmi2LastSuccessfulTime)
     assert fast.boolean_status(fmi2Terminated) == slow.boolean_status(fmi2Terminated) == (OK, 1)
     assert fast.fast_calls > 150 and slow.fast_calls == 0

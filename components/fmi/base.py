@@ -23,11 +23,14 @@ only raising fails a call (fmi2Fatal), and a refused step is fmi2Discard.
 
 The fast path: behind robofmu's export library the slave, once constructed, registers with it
 (:class:`_FastShared`: its ``values`` array, which masks of slots are Real / Boolean / Real
-inputs, the flags ``_initialized``/``_terminated``, ``_dirty`` and ``_inputs_checked`` as shared
-fields, and :meth:`BlockSlave._fast_refresh`, :meth:`BlockSlave._fast_step`). While initialized,
-that library then serves fmi2SetReal of inputs, fmi2GetReal / fmi2GetBoolean and fmi2DoStep
-itself, calling only those two methods (the header comment of ``robofmu_fmi2.c``, point 4); all
-other calls still come here through pythonfmu. So ``values`` is never rebound.
+inputs / Real outputs, the flags ``_initialized``/``_terminated``, ``_dirty`` and
+``_inputs_checked`` as shared fields, an array for the values saved before a refresh, and
+:meth:`BlockSlave._fast_refresh`, :meth:`BlockSlave._fast_step`,
+:meth:`BlockSlave._fast_nonfinite`, with NumPy's error state, :data:`.quiet.ERROR_STATE`).
+While initialized, that library then serves fmi2SetReal of inputs, fmi2GetReal /
+fmi2GetBoolean and fmi2DoStep itself, calling only those methods (the header comment of
+``robofmu_fmi2.c``, point 4); all other calls still come here through pythonfmu. So
+``values`` is never rebound.
 """
 from __future__ import annotations
 
@@ -53,7 +56,7 @@ from ..blocks import StepRefused, block_type
 from ..robots import load_description, load_model
 from ..robots.description import read
 from .model_description import PYTHON, VENDOR_TOOL, complete  # noqa: F401  (VENDOR_TOOL: public here)
-from .quiet import quietly
+from .quiet import ERROR_STATE, quietly
 
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
 _VARIABILITY = {v.name: v for v in Fmi2Variability}
@@ -82,12 +85,13 @@ class _FastShared(ctypes.Structure):
     _fields_ = [("version", ctypes.c_uint32), ("size", ctypes.c_uint32),
                 ("values", ctypes.c_void_p), ("n", ctypes.c_size_t),
                 ("get_real", ctypes.c_void_p), ("get_boolean", ctypes.c_void_p), ("set_real", ctypes.c_void_p),
+                ("output", ctypes.c_void_p), ("saved", ctypes.c_void_p),
                 ("active", ctypes.c_int32), ("dirty", ctypes.c_int32), ("inputs_checked", ctypes.c_int32),
                 ("call", ctypes.c_int32)]
 
 
-_FAST_VERSION = 1                   # robofmu_fmi2.c: FAST_VERSION
-_FAST_OK, _FAST_MESSAGES = 1, 2     # what _fast_refresh and _fast_step return, as bits
+_FAST_VERSION = 2                   # robofmu_fmi2.c: FAST_VERSION
+_FAST_OK, _FAST_MESSAGES, _FAST_CHECK = 1, 2, 4     # what the _fast_* methods return, as bits
 _FAST_CALLS = {1: "fmi2GetReal", 2: "fmi2GetBoolean"}       # FastShared.call
 
 
@@ -158,8 +162,11 @@ class BlockSlave(Fmi2Slave):
         self._indices: dict[tuple, np.ndarray] = {}
         self._names = [v.name for v in self.logic.variables]
         self._feedthrough = self.logic.feedthrough   # outputs that depend on inputs (else on state only)
-        self._fast_masks = [np.ascontiguousarray(mask, dtype=np.uint8)
-                            for mask in (self._real, kinds == "Boolean", self._input_real)]
+        self._fast_masks = [np.ascontiguousarray(mask, dtype=np.uint8) for mask in
+                            (self._real, kinds == "Boolean", self._input_real, self._output_mask != 0.0)]
+        self._saved = np.zeros(len(kinds))     # the fast path: values before a refresh (the library writes it)
+        self._output_now = functools.partial(quietly, self.logic.output)      # see _register_fast_path
+        self._advance_now = functools.partial(quietly, self.logic.advance)
         if self._statuses:
             self.fast_path = self._register_fast_path()       # last: the instance is complete
 
@@ -197,7 +204,9 @@ class BlockSlave(Fmi2Slave):
         shared = self._shared
         shared.values = values.ctypes.data
         shared.n = values.size
-        shared.get_real, shared.get_boolean, shared.set_real = (m.ctypes.data for m in self._fast_masks)
+        shared.get_real, shared.get_boolean, shared.set_real, shared.output = (m.ctypes.data for m in self._fast_masks)
+        shared.saved = self._saved.ctypes.data
+        quiet_var, quiet_value = ERROR_STATE if ERROR_STATE is not None else (None, None)
         folder = Path(self.resources).parent / "binaries" / "linux64"
         for path in sorted(folder.glob("*.so")):
             if path.name == _PYTHONFMU_LIBRARY:
@@ -211,30 +220,78 @@ class BlockSlave(Fmi2Slave):
                 if register is None:
                     continue
                 register.restype = ctypes.c_int
-                register.argtypes = [ctypes.c_void_p, ctypes.py_object, ctypes.py_object]
-                if register(ctypes.addressof(shared), self._fast_refresh, self._fast_step) == 1:
+                register.argtypes = [ctypes.c_void_p] + [ctypes.py_object] * 3 + [ctypes.c_void_p] * 2
+                # NumPy's error state as the objects' addresses (None: NULL); alive as module globals
+                if register(ctypes.addressof(shared), self._fast_refresh, self._fast_step, self._fast_nonfinite,
+                            None if quiet_var is None else id(quiet_var),
+                            None if quiet_value is None else id(quiet_value)) == 1:
+                    if quiet_var is not None:       # the library sets NumPy's error state around each call
+                        self._output_now, self._advance_now = self.logic.output, self.logic.advance
                     return True
             finally:
                 _ctypes.dlclose(library._handle)
         return False
 
+    # The three callables the library calls (the slave initialized and not terminated). It has
+    # saved the values into _saved before a refresh and set NumPy's error state, as quietly()
+    # does, around each call. The usual case takes the shortest way; any other goes the way
+    # of the FMI method (get_real's refresh, do_step), which decides and reports.
     def _fast_refresh(self) -> int:
-        """The fast path's refresh(): the outputs brought up to date as fmi2GetReal /
-        fmi2GetBoolean (``_shared.call``) do here. Never raises: _FAST_OK if it succeeded,
-        +_FAST_MESSAGES if messages wait in the log queue."""
+        """refresh(): the outputs brought up to date as fmi2GetReal / fmi2GetBoolean
+        (``_shared.call``) do here. Never raises: _FAST_OK if it succeeded, +_FAST_MESSAGES if
+        messages wait in the log queue, +_FAST_CHECK if it computed the outputs and leaves
+        their check to the library (finite: the outputs are current; else it calls
+        :meth:`_fast_nonfinite`)."""
+        shared = self._shared
         try:
-            if self._shared.dirty:
+            if not shared.dirty:
+                done = _FAST_OK
+            elif shared.inputs_checked:            # the usual case: _output_safely, the check in C
+                try:
+                    self._output_now(self.time)
+                except Exception as exc:
+                    self._output_failed(exc, self._saved[self._output_slots])
+                    done = _FAST_OK
+                else:
+                    self._bad_output = None
+                    done = _FAST_OK | _FAST_CHECK
+            else:
                 self._refresh()
-            done = _FAST_OK
+                done = _FAST_OK
         except BaseException as exc:    # nothing may reach the C caller
+            self._report_failure(exc, _FAST_CALLS.get(shared.call, "fmi2GetReal"))
+            done = 0
+        return (done | _FAST_MESSAGES) if self.log_queue else done
+
+    def _fast_nonfinite(self) -> int:
+        """nonfinite(): the library found a non-finite output after :meth:`_fast_refresh`: the
+        saved outputs held and the reason reported, as :meth:`_output_safely` does."""
+        try:
+            self._hold_nonfinite(self._saved[self._output_slots])
+            done = _FAST_OK
+        except BaseException as exc:
             self._report_failure(exc, _FAST_CALLS.get(self._shared.call, "fmi2GetReal"))
             done = 0
         return (done | _FAST_MESSAGES) if self.log_queue else done
 
     def _fast_step(self, current_time: float, step_size: float) -> int:
-        """The fast path's step(t, h): :meth:`do_step`; returns as :meth:`_fast_refresh`."""
+        """step(t, h): :meth:`do_step`; returns as :meth:`_fast_refresh`."""
+        shared = self._shared
         try:
-            done = _FAST_OK if self._do_step(current_time, step_size) else 0
+            if (shared.inputs_checked and self._bad_output is None          # the usual case of do_step
+                    and not (shared.dirty and self._feedthrough) and 0.0 < step_size < math.inf
+                    and abs(current_time - self.time) <= 1e-9 * max(1.0, abs(self.time))):
+                try:
+                    self._advance_now(current_time, step_size)
+                except Exception as exc:
+                    done = _FAST_OK if self._step_failed(exc, current_time) else 0
+                else:
+                    self.time = current_time + step_size
+                    self._held_warned = False
+                    shared.dirty = 1
+                    done = _FAST_OK
+            else:
+                done = _FAST_OK if self._do_step(current_time, step_size) else 0
         except BaseException as exc:    # do_step catches every Exception; this the rest
             self._report_failure(exc, "fmi2DoStep")
             done = 0
@@ -405,7 +462,7 @@ class BlockSlave(Fmi2Slave):
 
     def nonfinite_input(self) -> str | None:
         """'name = value' of the first non-finite Real input, or None."""
-        if math.isfinite(self.values.dot(self._input_mask)):    # fast path: nan and inf propagate
+        if math.isfinite(quietly(self.values.dot, self._input_mask)):    # nan, inf propagate (inf 0: nan)
             return None
         values = self.values[self._input_vrs]
         bad = np.flatnonzero(~np.isfinite(values))
@@ -455,7 +512,7 @@ class BlockSlave(Fmi2Slave):
 
     def _nonfinite_output(self) -> str | None:
         """Why the outputs just computed are not finite (naming the largest input), or None."""
-        if math.isfinite(self.values.dot(self._output_mask)):     # fast path: nan and inf propagate
+        if math.isfinite(quietly(self.values.dot, self._output_mask)):    # nan, inf propagate (inf 0: nan)
             return None
         outputs = self.values[self._output_slots]
         if np.isfinite(outputs).all():                           # a non-finite value elsewhere
@@ -484,25 +541,36 @@ class BlockSlave(Fmi2Slave):
                     self._held_warned = True
                 return
             shared.inputs_checked = 1
-        values = self.values
-        held = values.take(self._output_slots, out=self._held)
+        held = self.values.take(self._output_slots, out=self._held)
         try:
             quietly(self.logic.output, self.time)    # an overflow is reported below, not as a host warning
         except Exception as exc:
-            self.values[self._output_slots] = held
-            self._bad_output = f"evaluating outputs failed: {type(exc).__name__}: {exc}"
-            self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}\n"
-                     f"{traceback.format_exc()}", Fmi2Status.error)
+            self._output_failed(exc, held)
             return
-        if not math.isfinite(values.dot(self._output_mask)):     # else every output is finite
-            bad = self._nonfinite_output()
-            if bad is not None:
-                values[self._output_slots] = held
-                self._bad_output = f"{bad}: outputs held at their last values"
-                self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
-                return
+        if self._hold_nonfinite(held):
+            return
         self._bad_output = None
         shared.dirty = 0                # _dirty
+
+    def _output_failed(self, exc: Exception, held: np.ndarray) -> None:
+        """Evaluating the outputs raised ``exc``: the ``held`` ones back, the reason reported."""
+        self.values[self._output_slots] = held
+        self._bad_output = f"evaluating outputs failed: {type(exc).__name__}: {exc}"
+        self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}\n"
+                 f"{traceback.format_exc()}", Fmi2Status.error)
+
+    def _hold_nonfinite(self, held: np.ndarray) -> bool:
+        """If an output just computed is not finite: the ``held`` ones back, the reason
+        reported, True."""
+        if math.isfinite(quietly(self.values.dot, self._output_mask)):    # else every output is finite
+            return False
+        bad = self._nonfinite_output()
+        if bad is None:
+            return False
+        self.values[self._output_slots] = held
+        self._bad_output = f"{bad}: outputs held at their last values"
+        self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
+        return True
 
     def _step_problem(self, current_time: float, step_size: float) -> str | None:
         """Why ``fmi2DoStep(current_time, step_size)`` cannot run now, or None."""
@@ -536,15 +604,19 @@ class BlockSlave(Fmi2Slave):
             if self._bad_output is not None:
                 return self.fail(f"t = {current_time:.9g} s: {self._bad_output}; step refused")
             quietly(self.logic.advance, current_time, step_size)
-        except StepRefused as exc:
-            return self.fail(str(exc))
         except Exception as exc:
-            return self.fail(f"step from t = {current_time:.9g} s failed: {type(exc).__name__}: {exc}\n"
-                             f"{traceback.format_exc()}")
+            return self._step_failed(exc, current_time)
         self.time = current_time + step_size
         self._held_warned = False
         shared.dirty = 1        # _dirty: internal state moved on, outputs at t + h are due
         return True
+
+    def _step_failed(self, exc: Exception, current_time: float) -> bool:
+        """The block's advance raised ``exc``: the step refused with its reason (False)."""
+        if isinstance(exc, StepRefused):
+            return self.fail(str(exc))
+        return self.fail(f"step from t = {current_time:.9g} s failed: {type(exc).__name__}: {exc}\n"
+                         f"{traceback.format_exc()}")
 
     # -- FMU state ------------------------------------------------------------------------------------
     def _identity(self) -> dict:

@@ -5,7 +5,8 @@ error message (the wrapper checks every output), not as a RuntimeWarning printed
 ``numpy.errstate`` does that but builds its state anew at every entry (about 2 µs, twice per
 block-step); :func:`quietly` sets the same state, built once, on NumPy's error-state context
 variable (NumPy >= 2: ``numpy._core._ufunc_config``) and falls back to ``numpy.errstate`` where
-that is not found.
+that is not found. :data:`ERROR_STATE` hands the same two objects to C code that does the same
+around its calls into Python (robofmu's FMI export library, on its fast path).
 """
 from __future__ import annotations
 
@@ -15,7 +16,11 @@ try:
     from numpy._core._ufunc_config import _extobj_contextvar, _make_extobj
     _IGNORE = _make_extobj(all="ignore")
 except (ImportError, AttributeError, TypeError):        # another NumPy: the public way
-    _extobj_contextvar = None
+    _extobj_contextvar = _IGNORE = None
+
+#: ``(context variable, value)``: setting the value in the variable (``ContextVar.set``, then
+#: ``reset`` with its token) is :func:`quietly`; None where this NumPy has no such variable.
+ERROR_STATE = None if _extobj_contextvar is None else (_extobj_contextvar, _IGNORE)
 
 
 def quietly(function, *args):

@@ -88,6 +88,7 @@ class IKSolver:
         self._A = np.zeros((n, n))                 # A = [J; C]: the constraint rows set once
         self._A[m:] = self.constraint_rows
         self._rhs = np.zeros(n)                    # [xd; 0], then [xdd - Jdot qd; 0]
+        self._ones = np.ones(n)
 
     def setup(self) -> None:
         """Read the parameters (``self.values``) and robot geometry; set ``constraint_rows``."""
@@ -123,7 +124,7 @@ class IKSolver:
         qd = getrs(lu, pivots, rhs)[0]
         np.subtract(xdd, self.robot.jdot_qdot(q, qd), out=rhs[:m])
         qdd = getrs(lu, pivots, rhs)[0]
-        if not math.isfinite(qd.sum() + qdd.sum()):
+        if not math.isfinite(qd.dot(self._ones) + qdd.dot(self._ones)):    # nan and inf propagate
             raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
         return qd, qdd
 

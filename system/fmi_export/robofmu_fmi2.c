@@ -45,10 +45,14 @@
       calls robofmu_fast_register with a struct it owns (FastShared: the address and length of
       its float64 `values` array, whose slot is the value reference; a byte per slot for Real
       gettable, Boolean gettable, Real settable as an input; flags it reads and writes as
-      attributes: initialized and not terminated, outputs stale (dirty), inputs checked) and two
-      callables, refresh() (bring the outputs up to date, as its get_real does when stale) and
-      step(t, h) (its do_step), which catch every exception and return 1 if they succeeded, +2
-      if messages wait in its log queue. A registration outside this library's fmi2Instantiate
+      attributes: initialized and not terminated, outputs stale (dirty), inputs checked; a byte
+      per slot for Real outputs, and an array of n doubles to save the values into), three
+      callables, refresh() (bring the outputs up to date, as its get_real does when stale),
+      step(t, h) (its do_step) and nonfinite() (hold the saved outputs and report), which catch
+      every exception and return 1 if they succeeded, +2 if messages wait in its log queue (+4
+      from refresh(): outputs computed, their check left to this layer), and NumPy's
+      error-state context variable with the value "ignore", set around every one of those
+      calls (PyContextVar_Set, then _Reset: what the slave's quietly() does, once per call). A registration outside this library's fmi2Instantiate
       (or fmi2Reset) in the same thread is refused, so is one with another struct version or
       size, or where a Python C-API function below cannot be found (dlsym(RTLD_DEFAULT): the
       functions pythonfmu's library binds to; nothing links libpython), or with the
@@ -60,9 +64,10 @@
         value written is not finite, the inputs unchecked: no Python at all;
       - fmi2GetReal of Real variables only and fmi2GetBoolean of Boolean variables only call
         refresh() if the outputs are stale (PyGILState_Ensure: the host may hold the GIL, as
-        the master's ctypes.PyDLL calls do, or not, as libcosim's threads), then copy the
-        values (a Boolean is value != 0.0); if refresh() failed, zeros / false, as the slave's
-        get_real does;
+        the master's ctypes.PyDLL calls do, or not, as libcosim's threads), the values saved
+        first; if it says +4, the outputs are checked here: all finite, they are current (not
+        stale), else nonfinite() is called; then the values are copied (a Boolean is value !=
+        0.0); if refresh() failed, zeros / false, as the slave's get_real does;
       - fmi2DoStep calls step(t, h); a refused step is fmi2Discard from pythonfmu, so it is
         here, raised to the logged status (fmi2Error: point 1). The status pythonfmu's
         fmi2GetRealStatus (fmi2LastSuccessfulTime) and fmi2GetBooleanStatus (fmi2Terminated)
@@ -313,6 +318,8 @@ typedef int PyGILState;                     /* PyGILState_STATE, an enum */
     X(long, PyLong_AsLong, (PyObject*)) \
     X(PyObject*, PyErr_Occurred, (void)) \
     X(void, PyErr_Clear, (void)) \
+    X(PyObject*, PyContextVar_Set, (PyObject*, PyObject*)) \
+    X(int, PyContextVar_Reset, (PyObject*, PyObject*)) \
     X(void, Py_IncRef, (PyObject*)) \
     X(void, Py_DecRef, (PyObject*))
 
@@ -342,7 +349,7 @@ static int python_api(void)
 
 /* What robofmu's slave shares with this layer (components/fmi/base.py: _FastShared, the same
    layout). It owns the struct, the values array and the masks, alive as long as the slave. */
-#define FAST_VERSION 1u
+#define FAST_VERSION 2u
 typedef struct {
     uint32_t version;                       /* FAST_VERSION */
     uint32_t size;                          /* sizeof(FastShared) */
@@ -351,6 +358,8 @@ typedef struct {
     const unsigned char* get_real;          /* per slot: a Real variable */
     const unsigned char* get_boolean;       /* per slot: a Boolean variable */
     const unsigned char* set_real;          /* per slot: a Real input */
+    const unsigned char* output;            /* per slot: a Real output */
+    double* saved;                          /* n values: the values as they were before refresh() */
     int32_t active;                         /* initialized and not terminated */
     int32_t dirty;                          /* outputs stale: refresh() before reading them */
     int32_t inputs_checked;                 /* inputs found finite since they were last set */
@@ -358,27 +367,38 @@ typedef struct {
 } FastShared;
 
 enum { FAST_GET_REAL = 1, FAST_GET_BOOLEAN = 2 };
-#define FAST_OK 1                           /* refresh() and step() return these bits */
+#define FAST_OK 1                           /* refresh(), step() and nonfinite() return these bits */
 #define FAST_MESSAGES 2
+#define FAST_CHECK 4                        /* refresh(): outputs computed, check them here */
 
 typedef struct {
     FastShared* shared;                     /* NULL: not registered, every call forwards */
     PyObject* refresh;                      /* new references */
     PyObject* step;
+    PyObject* nonfinite;
+    PyObject* quiet_var;                    /* NULL, or NumPy's error-state context variable */
+    PyObject* quiet_value;                  /* and the state "ignore all" to set in it */
 } Fast;
+
+#define FAST_NONE {NULL, NULL, NULL, NULL, NULL, NULL}
 
 /* The registration slot of the fmi2Instantiate (or fmi2Reset) under way in this thread. */
 static __thread Fast* registering = NULL;
 
-/* Called by robofmu's slave at the end of its construction (ctypes); 1 if registered. */
-EXPORT int robofmu_fast_register(FastShared* shared, PyObject* refresh, PyObject* step)
+/* Called by robofmu's slave at the end of its construction (ctypes); 1 if registered.
+   quiet_var and quiet_value: both NULL, or NumPy's error-state context variable and the state
+   to set in it around every call of refresh(), step() and nonfinite() (set, then reset). */
+EXPORT int robofmu_fast_register(FastShared* shared, PyObject* refresh, PyObject* step,
+                                 PyObject* nonfinite, PyObject* quiet_var, PyObject* quiet_value)
 {
     Fast* slot = registering;
-    if (slot == NULL || slot->shared != NULL || shared == NULL || refresh == NULL || step == NULL)
+    if (slot == NULL || slot->shared != NULL || shared == NULL || refresh == NULL || step == NULL
+        || nonfinite == NULL || (quiet_var == NULL) != (quiet_value == NULL))
         return 0;
     if (shared->version != FAST_VERSION || shared->size != sizeof *shared
         || (shared->n > 0 && (shared->values == NULL || shared->get_real == NULL
-                              || shared->get_boolean == NULL || shared->set_real == NULL)))
+                              || shared->get_boolean == NULL || shared->set_real == NULL
+                              || shared->output == NULL || shared->saved == NULL)))
         return 0;
     const char* setting = getenv("ROBOFMU_FMI_FAST_PATH");
     if (setting != NULL && strcmp(setting, "0") == 0) return 0;
@@ -386,10 +406,18 @@ EXPORT int robofmu_fast_register(FastShared* shared, PyObject* refresh, PyObject
     PyGILState gil = py.PyGILState_Ensure();
     py.Py_IncRef(refresh);
     py.Py_IncRef(step);
+    py.Py_IncRef(nonfinite);
+    if (quiet_var != NULL) {
+        py.Py_IncRef(quiet_var);
+        py.Py_IncRef(quiet_value);
+    }
     py.PyGILState_Release(gil);
     slot->shared = shared;
     slot->refresh = refresh;
     slot->step = step;
+    slot->nonfinite = nonfinite;
+    slot->quiet_var = quiet_var;
+    slot->quiet_value = quiet_value;
     return 1;
 }
 
@@ -399,9 +427,13 @@ static void fast_release(Fast* fast)
     PyGILState gil = py.PyGILState_Ensure();
     py.Py_DecRef(fast->refresh);
     py.Py_DecRef(fast->step);
+    py.Py_DecRef(fast->nonfinite);
+    if (fast->quiet_var != NULL) {
+        py.Py_DecRef(fast->quiet_var);
+        py.Py_DecRef(fast->quiet_value);
+    }
     py.PyGILState_Release(gil);
-    fast->shared = NULL;
-    fast->refresh = fast->step = NULL;
+    *fast = (Fast)FAST_NONE;
 }
 
 /* -- one instance ---------------------------------------------------------------------------- */
@@ -534,7 +566,7 @@ static int fast_result(PyObject* result)
         py.PyErr_Clear();
         return -1;
     }
-    return (int)(bits & (FAST_OK | FAST_MESSAGES));
+    return (int)(bits & (FAST_OK | FAST_MESSAGES | FAST_CHECK));
 }
 
 /* After a fast-path Python call (the GIL released): the messages the slave queued reach the
@@ -555,14 +587,58 @@ static int fast_done(Instance* in, int bits, const char* call)
     return bits > 0 && (bits & FAST_OK);
 }
 
-/* Outputs up to date before they are read: 1, or 0 if refresh() failed (read zeros). */
+/* NumPy's floating-point errors ignored around a call into the slave (what its
+   components/fmi/quiet.py does, done here once per call): the token to hand to quiet_end. */
+static PyObject* quiet_begin(const Fast* fast)
+{
+    if (fast->quiet_var == NULL) return NULL;
+    PyObject* token = py.PyContextVar_Set(fast->quiet_var, fast->quiet_value);
+    if (token == NULL) py.PyErr_Clear();    /* the slave's own fallback (numpy.errstate) still holds */
+    return token;
+}
+
+static void quiet_end(const Fast* fast, PyObject* token)
+{
+    if (token == NULL) return;
+    if (py.PyContextVar_Reset(fast->quiet_var, token) != 0) py.PyErr_Clear();
+    py.Py_DecRef(token);
+}
+
+static int outputs_finite(const FastShared* shared)
+{
+    double sum = 0.0;                       /* nan and inf propagate through the sum */
+    for (size_t k = 0; k < shared->n; ++k) {
+        if (shared->output[k]) sum += shared->values[k];
+    }
+    if (isfinite(sum)) return 1;
+    for (size_t k = 0; k < shared->n; ++k) {    /* an overflow of finite values is no failure */
+        if (shared->output[k] && !isfinite(shared->values[k])) return 0;
+    }
+    return 1;
+}
+
+/* Outputs up to date before they are read: 1, or 0 if refresh() failed (read zeros).
+   The values are saved first; if refresh() says FAST_CHECK (it computed the outputs and left
+   the check to this layer) and an output is not finite, nonfinite() holds the saved ones and
+   reports; else the outputs are current. */
 static int fast_refresh(Instance* in, int call)
 {
     FastShared* shared = in->fast.shared;
     if (!shared->dirty) return 1;
     shared->call = call;
+    memcpy(shared->saved, shared->values, shared->n * sizeof *shared->values);
     PyGILState gil = py.PyGILState_Ensure();
+    PyObject* token = quiet_begin(&in->fast);
     int bits = fast_result(py.PyObject_CallObject(in->fast.refresh, NULL));
+    if (bits > 0 && (bits & FAST_CHECK)) {
+        if (outputs_finite(shared)) {
+            shared->dirty = 0;
+        } else {
+            int more = fast_result(py.PyObject_CallObject(in->fast.nonfinite, NULL));
+            bits = more < 0 ? more : (more | (bits & FAST_MESSAGES));
+        }
+    }
+    quiet_end(&in->fast, token);
     py.PyGILState_Release(gil);
     return fast_done(in, bits, call == FAST_GET_REAL ? "fmi2GetReal" : "fmi2GetBoolean");
 }
@@ -614,7 +690,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     in->logging_on = loggingOn ? 1 : 0;
     in->name = strdup(instanceName ? instanceName : "");
     in->last_successful_time = NAN;     /* pythonfmu's start values */
-    Fast pending = {NULL, NULL, NULL};
+    Fast pending = FAST_NONE;
     Fast* outer = registering;
     registering = &pending;             /* the slave registers while pythonfmu constructs it */
     in->stock = stock.fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
@@ -683,7 +759,7 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
     ENTER(c);
     fast_release(&in->fast);
-    Fast pending = {NULL, NULL, NULL};
+    Fast pending = FAST_NONE;
     Fast* outer = registering;
     registering = &pending;
     fmi2Status s = stock.fmi2Reset(in->stock);
@@ -822,8 +898,10 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint
         in->fast_calls++;
         in->fast_stepped = 1;
         PyGILState gil = py.PyGILState_Ensure();
+        PyObject* token = quiet_begin(&in->fast);
         int bits = fast_result(py.PyObject_CallFunction(in->fast.step, "dd", currentCommunicationPoint,
                                                         communicationStepSize));
+        quiet_end(&in->fast, token);
         py.PyGILState_Release(gil);
         s = fast_done(in, bits, "fmi2DoStep") ? fmi2OK : fmi2Discard;   /* pythonfmu's statuses */
     } else {

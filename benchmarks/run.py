@@ -4,7 +4,9 @@ For every block of every robot, one communication step is what the master does a
 set the inputs (one batched call per type), get the outputs, doStep. The direct column runs the
 block's own FMI-free logic (robofmu.components.blocks) on the same values: set the inputs,
 compute the outputs, advance. Inputs are the FMU's start values (the robot at home). Times are
-the best of several repeats.
+the best of several repeats. The FMI column calls through fmpy's ``FMU2Slave`` methods, as a
+script using fmpy does (Python lists converted at every call: several µs a call of fmpy's own);
+the master binds the FMI functions itself (``benchmarks/split.py`` times that way).
 
     make bench            # or: .venv/bin/python benchmarks/run.py [--fmus DIR] [--steps N] [ROBOT ...]
 """
@@ -97,11 +99,12 @@ def main(argv=None) -> int:
             finally:
                 fmu.close()
             rows.append((robot, kind, t_direct * 1e6, t_fmi * 1e6, t_fmi / t_direct))
-    header = f"{'robot':<8}{'block':<12}{'direct (us)':>13}{'through FMI (us)':>18}{'ratio':>8}"
+    width = max([len("robot")] + [len(r[0]) for r in rows]) + 2
+    header = f"{'robot':<{width}}{'block':<12}{'direct (us)':>13}{'through FMI (us)':>18}{'ratio':>8}"
     print(header)
     print("-" * len(header))
     for robot, kind, direct_us, fmi_us, ratio in rows:
-        print(f"{robot:<8}{kind:<12}{direct_us:>13.1f}{fmi_us:>18.1f}{ratio:>8.2f}")
+        print(f"{robot:<{width}}{kind:<12}{direct_us:>13.1f}{fmi_us:>18.1f}{ratio:>8.2f}")
     print(f"\none communication step (set inputs, get outputs, doStep) at h = {H * 1e3:g} ms; "
           f"best of {args.repeats} x {args.steps} steps")
     return 0

@@ -102,8 +102,12 @@ class IKSolver:
         initial guess if None. Closed-form solvers ignore it."""
 
     def augmented_jacobian(self, q: np.ndarray) -> np.ndarray:
-        """A(q) = [J(q); C], shape (n, n)."""
-        return np.vstack([self.robot.jacobian(q), self.constraint_rows])
+        """A(q) = [J(q); C], shape (n, n): a new array."""
+        A = np.empty((self.robot.n, self.robot.n))
+        m = self.robot.m
+        A[:m] = self.robot.jacobian(q)
+        A[m:] = self.constraint_rows
+        return A
 
     def rates(self, q: np.ndarray, xd: np.ndarray, xdd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joint velocity and acceleration for task velocity ``xd`` and acceleration ``xdd`` at ``q``.

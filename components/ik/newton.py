@@ -32,9 +32,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.linalg.lapack import dgesdd as gesdd, dgetrf as getrf, dgetrs as getrs
 
 from ..parameters import Parameter
 from .base import Diagnostic, IKSolver, Unreachable
+
+# LAPACK called directly, as numpy.linalg calls it (getrf + getrs: solve; gesdd without
+# vectors: the singular values of cond): numpy.linalg's wrappers cost several times a 3 x 3.
 
 #: A Newton step longer than this (rad, m) comes from a numerically singular Jacobian.
 STEP_BOUND = 1e6
@@ -119,6 +123,7 @@ class NewtonRaphsonIK(IKSolver):
         self.damped = values["step_control"] == "damped"
         self.max_condition = float(values["max_condition"])
         self.lower, self.upper = robot.position_limits()
+        self._limits = list(zip(self.lower.tolist(), self.upper.tolist()))
         if np.any(self.q_guess < self.lower) or np.any(self.q_guess > self.upper):
             raise ValueError(f"IK solver {self.kind!r}: q_guess = {self.q_guess.tolist()} lies outside "
                              "the joint limits")
@@ -135,9 +140,9 @@ class NewtonRaphsonIK(IKSolver):
 
     def position(self, x):
         x = np.asarray(x, dtype=float)
-        q = np.clip(self.start, self.lower, self.upper) if self.damped else np.array(self.start, dtype=float)
+        q = self.start.clip(self.lower, self.upper) if self.damped else np.array(self.start, dtype=float)
         F = self.residual(q, x)
-        r = r0 = float(np.linalg.norm(F))
+        r = r0 = _length(F)
         self.history = [r]
         self.iterates = [q]
         iterations = 0
@@ -161,13 +166,13 @@ class NewtonRaphsonIK(IKSolver):
                                           f"{iterations} iterations, residual {r:.3g} m")
                     q = q - step
                     F = self.residual(q, x)
-                    r = float(np.linalg.norm(F))
+                    r = _length(F)
                 iterations += 1
                 self.history.append(r)
                 self.iterates.append(q)
             if not self._within(q):
                 raise Unreachable(f"the solution q = {_show(q)} lies outside the joint limits")
-            condition = np.linalg.cond(self.augmented_jacobian(q))
+            condition = _condition(self.augmented_jacobian(q))
             if not condition <= self.max_condition:
                 raise Unreachable(f"the target is at a singularity: the Jacobian at the solution "
                                   f"q = {_show(q)} has condition number {condition:.3g} > max_condition "
@@ -189,7 +194,7 @@ class NewtonRaphsonIK(IKSolver):
         return ""
 
     def _within(self, q) -> bool:
-        return bool(np.all(q >= self.lower) and np.all(q <= self.upper))
+        return all(low <= v <= high for v, (low, high) in zip(q.tolist(), self._limits))   # nan: False
 
     def _search(self, q, A, F, step, r, x):
         """One damped step: the Newton step (length-capped), halved up to three times, else
@@ -219,9 +224,9 @@ class NewtonRaphsonIK(IKSolver):
 
     def _try(self, q, d, phi, g, x):
         """(q, F, r) after the step q - d if it lowers phi enough, else None."""
-        q_new = np.clip(q - d, self.lower, self.upper)
+        q_new = (q - d).clip(self.lower, self.upper)
         F_new = self.residual(q_new, x)
-        r_new = float(np.linalg.norm(F_new))
+        r_new = _length(F_new)
         if 0.5 * r_new * r_new <= phi - ARMIJO * float(g @ (q - q_new)):
             return q_new, F_new, r_new
         return None
@@ -241,13 +246,25 @@ def _capped(step):
 
 def _newton_step(A, F):
     """A^-1 F, or None where A is (numerically) singular."""
-    try:
-        step = np.linalg.solve(A, F)
-    except np.linalg.LinAlgError:
+    lu, pivots, singular = getrf(A)
+    if singular:                      # an exactly zero pivot: numpy.linalg.solve's LinAlgError
         return None
-    if not np.isfinite(step.sum()) or not np.abs(step).max() < STEP_BOUND:
+    step = getrs(lu, pivots, F)[0]
+    if not math.isfinite(step.sum()) or not np.abs(step).max() < STEP_BOUND:
         return None
     return step
+
+
+def _length(v) -> float:
+    """|v| (2-norm) of a vector, as numpy.linalg.norm computes it (sqrt of v . v)."""
+    return math.sqrt(v.dot(v))
+
+
+def _condition(A) -> float:
+    """cond(A) in the 2-norm, as numpy.linalg.cond computes it (largest over smallest singular value)."""
+    s = gesdd(A, compute_uv=0)[1]
+    smallest = float(s[-1])
+    return float(s[0]) / smallest if smallest > 0.0 else math.inf     # singular (or nan): inf
 
 
 def _show(v) -> list[float]:

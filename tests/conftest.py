@@ -4,7 +4,8 @@
   (:func:`robofmu.components.robots.available`), built once per session;
 - ``fmu_dir``: ``<root>/chess`` (the chess tests name blocks relative to it);
 - ``robot``: a parametrized fixture, one test per described robot (ids: the robot's name);
-  :func:`fmu_util.robot_blocks` gives ``(robot, block)`` parameters with ids like ``rrp-plant``.
+  :func:`fmu_util.robot_blocks` gives ``(robot, block)`` parameters with ids like ``rrp-plant``;
+- ``raw_instances``: instances driven through the raw FMI functions (:class:`fmu_util.RawInstance`).
 """
 from __future__ import annotations
 
@@ -52,3 +53,21 @@ def chess():
 @pytest.fixture(scope="session")
 def rng():
     return np.random.default_rng(20261122)
+
+
+@pytest.fixture
+def raw_instances():
+    """``open_(path, name="block", **kwargs)`` -> :class:`fmu_util.RawInstance` (raw FMI calls,
+    messages recorded); every instance opened is closed after the test."""
+    from fmu_util import RawInstance
+
+    opened = []
+
+    def open_(path, name="block", **kwargs):
+        instance = RawInstance(path, name, **kwargs)
+        opened.append(instance)
+        return instance
+
+    yield open_
+    for instance in opened:
+        instance.close()

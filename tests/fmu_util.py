@@ -5,13 +5,22 @@
 - :class:`Loop`: an experiment's diagram stepped by hand, for tests that need the blocks between
   two steps (FMU state). Its topology is the experiment's (``robofmu.system.check.plan``: the
   wires and the evaluation order), nothing is wired here; a test that only needs a loop run
-  drives :class:`robofmu.system.master.Master` instead.
+  drives :class:`robofmu.system.master.Master` instead;
+- :class:`RawInstance`: one instance through fmpy's ``FMU2Slave`` with the raw FMI functions
+  (statuses as returned) and a logger of the test's own, for tests of statuses and messages.
 """
 from __future__ import annotations
 
+import ctypes
+import os
+import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2True)
 
 from robofmu.components.robots import available, load_description
 from robofmu.system import experiment
@@ -132,3 +141,123 @@ class Loop:
     def close(self) -> None:
         for b in self.blocks.values():
             b.close()
+
+
+# -- raw FMI instances ----------------------------------------------------------------------------
+OK, WARNING, DISCARD, ERROR, FATAL = range(5)          # fmi2Status
+LABEL = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
+H = 1e-3
+
+_KEEP: list = []
+
+
+def keep_alive(callbacks) -> None:
+    """Keep a logger (or callback struct) alive for the whole session: a FMU may log through one
+    after its test ended."""
+    _KEEP.append(callbacks)
+
+
+class RawInstance:
+    """One co-simulation instance through fmpy's FMU2Slave: the raw FMI functions (statuses as
+    returned), every message recorded as ``(status label, category, text)``. ``fast=False``
+    instantiates it with robofmu's FMI fast path off (``ROBOFMU_FMI_FAST_PATH=0``), None leaves
+    the environment as it is. ``component`` is None if fmi2Instantiate failed."""
+
+    def __init__(self, path: Path, name: str, fast: bool | None = None, logging_on: bool = False):
+        self.messages: list[tuple[str, str | None, str]] = []
+        md = read_model_description(str(path), validate=False)
+        self.variables = {v.name: v for v in md.modelVariables}
+        self.dir = extract(str(path))
+        self.slave = FMU2Slave(guid=md.guid, unzipDirectory=self.dir,
+                               modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        keep_alive(self.callbacks)
+        before = os.environ.get("ROBOFMU_FMI_FAST_PATH")
+        if fast is not None:
+            os.environ["ROBOFMU_FMI_FAST_PATH"] = "1" if fast else "0"
+        try:
+            self.component = self.slave.fmi2Instantiate(name.encode(), 1, md.guid.encode(),
+                                                        (Path(self.dir) / "resources").as_uri().encode(),
+                                                        ctypes.byref(self.callbacks), 0, int(logging_on))
+        finally:
+            if before is None:
+                os.environ.pop("ROBOFMU_FMI_FAST_PATH", None)
+            else:
+                os.environ["ROBOFMU_FMI_FAST_PATH"] = before
+
+    def _log(self, env, instance, status, category, message):
+        self.messages.append((LABEL[status], category.decode() if category else None,
+                              message.decode(errors="replace") if message else ""))
+
+    def _library_function(self, name: str, restype):
+        function = getattr(self.slave.dll, name)
+        function.argtypes, function.restype = [ctypes.c_void_p], restype
+        return function
+
+    @property
+    def fast_path(self) -> bool:
+        """Whether robofmu's FMI library serves this instance's hot calls itself."""
+        return bool(self._library_function("robofmu_fast_path", ctypes.c_int)(self.component))
+
+    @property
+    def fast_calls(self) -> int:
+        """How many calls of this instance the fast path served."""
+        return self._library_function("robofmu_fast_calls", ctypes.c_ulonglong)(self.component)
+
+    def names(self, kind: str, *causalities: str) -> list[str]:
+        return [n for n, v in self.variables.items() if v.type == kind and (not causalities or v.causality in causalities)]
+
+    def refs(self, names):
+        return (ctypes.c_uint * max(1, len(names)))(*[self.variables[n].valueReference for n in names])
+
+    def call(self, function: str, *args) -> int:
+        return self.slave._functions[function](self.component, *args)
+
+    def set_real(self, names, values) -> int:
+        return self.call("fmi2SetReal", self.refs(names), len(names), (ctypes.c_double * max(1, len(names)))(*values))
+
+    def get_real(self, names) -> tuple[int, np.ndarray]:
+        out = (ctypes.c_double * max(1, len(names)))()
+        status = self.call("fmi2GetReal", self.refs(names), len(names), out)
+        return status, np.array(out[:len(names)])
+
+    def get_boolean(self, names) -> tuple[int, list[int]]:
+        out = (ctypes.c_int * max(1, len(names)))()
+        status = self.call("fmi2GetBoolean", self.refs(names), len(names), out)
+        return status, list(out[:len(names)])
+
+    def set_boolean(self, names, values) -> int:
+        return self.call("fmi2SetBoolean", self.refs(names), len(names), (ctypes.c_int * max(1, len(names)))(*values))
+
+    def step(self, t: float, h: float = H) -> int:
+        return self.call("fmi2DoStep", t, h, fmi2True)
+
+    def initialize(self, parameters: dict | None = None) -> int:
+        """Set up, enter initialization, set the Real ``parameters``, exit: the exit's status."""
+        assert self.call("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0) == OK
+        assert self.call("fmi2EnterInitializationMode") == OK
+        for name, value in (parameters or {}).items():
+            assert self.set_real([name], [value]) == OK
+        return self.call("fmi2ExitInitializationMode")
+
+    def real_status(self, kind: int) -> tuple[int, float]:
+        value = ctypes.c_double()
+        return self.call("fmi2GetRealStatus", kind, ctypes.byref(value)), value.value
+
+    def boolean_status(self, kind: int) -> tuple[int, int]:
+        value = ctypes.c_int()
+        return self.call("fmi2GetBooleanStatus", kind, ctypes.byref(value)), value.value
+
+    def texts(self, *statuses: str) -> list[str]:
+        return [m for s, _, m in self.messages if not statuses or s in statuses]
+
+    def close(self) -> None:
+        if self.component:
+            self.slave.fmi2FreeInstance(self.component)
+            self.component = None
+        self.slave.freeLibrary()
+        shutil.rmtree(self.dir, ignore_errors=True)
+

@@ -13,14 +13,11 @@ from __future__ import annotations
 
 import ctypes
 import os
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import calloc, extract, free, read_model_description
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2True)
+from fmpy import extract, read_model_description
 
 from robofmu.components.fmi.base import BlockSlave
 from robofmu.components.robots import available
@@ -28,130 +25,23 @@ from robofmu.system import experiment
 from robofmu.system.master import Master
 from robofmu.system.replica import InProcessDiagram
 
-from fmu_util import robot_blocks
+from fmu_util import ERROR, H, OK, RawInstance, robot_blocks
 
-OK, WARNING, DISCARD, ERROR, FATAL = range(5)
-LABEL = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
-H = 1e-3
 fmi2LastSuccessfulTime, fmi2Terminated = 2, 3       # fmi2StatusKind
-
-# Loggers stay alive for the whole session: a FMU may log through one after its test ended.
-_KEEP: list = []
 
 HOT = robot_blocks(kinds=("controller", "plant"))
 WITH_BOOLEANS = robot_blocks(kinds=("ik",)) + robot_blocks(kinds=("trajectory", "controller", "plant"),
                                                            robots=["chess"])
 
 
-class Raw:
-    """One co-simulation instance through fmpy's FMU2Slave: the raw FMI functions (statuses as
-    returned), every message recorded. ``fast=False`` instantiates it with the fast path off."""
-
-    def __init__(self, path: Path, name: str, fast: bool = True, logging_on: bool = False):
-        self.messages: list[tuple[str, str | None, str]] = []
-        md = read_model_description(str(path), validate=False)
-        self.variables = {v.name: v for v in md.modelVariables}
-        self.dir = extract(str(path))
-        self.slave = FMU2Slave(guid=md.guid, unzipDirectory=self.dir,
-                               modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        _KEEP.append(self.callbacks)
-        before = os.environ.get("ROBOFMU_FMI_FAST_PATH")
-        os.environ["ROBOFMU_FMI_FAST_PATH"] = "1" if fast else "0"
-        try:
-            self.component = self.slave.fmi2Instantiate(name.encode(), 1, md.guid.encode(),
-                                                        (Path(self.dir) / "resources").as_uri().encode(),
-                                                        ctypes.byref(self.callbacks), 0, int(logging_on))
-        finally:
-            if before is None:
-                del os.environ["ROBOFMU_FMI_FAST_PATH"]
-            else:
-                os.environ["ROBOFMU_FMI_FAST_PATH"] = before
-        assert self.component, self.messages
-        self._fast_path = self.slave.dll.robofmu_fast_path
-        self._fast_path.argtypes, self._fast_path.restype = [ctypes.c_void_p], ctypes.c_int
-        self._fast_calls = self.slave.dll.robofmu_fast_calls
-        self._fast_calls.argtypes, self._fast_calls.restype = [ctypes.c_void_p], ctypes.c_ulonglong
-
-    def _log(self, env, instance, status, category, message):
-        self.messages.append((LABEL[status], category.decode() if category else None,
-                              message.decode(errors="replace") if message else ""))
-
-    @property
-    def fast_path(self) -> bool:
-        return bool(self._fast_path(self.component))
-
-    @property
-    def fast_calls(self) -> int:
-        return self._fast_calls(self.component)
-
-    def names(self, kind: str, *causalities: str) -> list[str]:
-        return [n for n, v in self.variables.items() if v.type == kind and (not causalities or v.causality in causalities)]
-
-    def refs(self, names):
-        return (ctypes.c_uint * max(1, len(names)))(*[self.variables[n].valueReference for n in names])
-
-    def call(self, function: str, *args) -> int:
-        return self.slave._functions[function](self.component, *args)
-
-    def set_real(self, names, values) -> int:
-        return self.call("fmi2SetReal", self.refs(names), len(names), (ctypes.c_double * max(1, len(names)))(*values))
-
-    def get_real(self, names) -> tuple[int, np.ndarray]:
-        out = (ctypes.c_double * max(1, len(names)))()
-        status = self.call("fmi2GetReal", self.refs(names), len(names), out)
-        return status, np.array(out[:len(names)])
-
-    def get_boolean(self, names) -> tuple[int, list[int]]:
-        out = (ctypes.c_int * max(1, len(names)))()
-        status = self.call("fmi2GetBoolean", self.refs(names), len(names), out)
-        return status, list(out[:len(names)])
-
-    def set_boolean(self, names, values) -> int:
-        return self.call("fmi2SetBoolean", self.refs(names), len(names), (ctypes.c_int * max(1, len(names)))(*values))
-
-    def step(self, t: float, h: float = H) -> int:
-        return self.call("fmi2DoStep", t, h, fmi2True)
-
-    def initialize(self) -> None:
-        assert self.call("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0) == OK
-        assert self.call("fmi2EnterInitializationMode") == OK
-        assert self.call("fmi2ExitInitializationMode") == OK, self.messages
-
-    def real_status(self, kind: int) -> tuple[int, float]:
-        value = ctypes.c_double()
-        return self.call("fmi2GetRealStatus", kind, ctypes.byref(value)), value.value
-
-    def boolean_status(self, kind: int) -> tuple[int, int]:
-        value = ctypes.c_int()
-        return self.call("fmi2GetBooleanStatus", kind, ctypes.byref(value)), value.value
-
-    def texts(self, *statuses: str) -> list[str]:
-        return [m for s, _, m in self.messages if not statuses or s in statuses]
-
-    def close(self) -> None:
-        if self.component:
-            self.slave.fmi2FreeInstance(self.component)
-            self.component = None
-        self.slave.freeLibrary()
-        shutil.rmtree(self.dir, ignore_errors=True)
-
-
 @pytest.fixture
-def raw():
-    opened = []
-
-    def open_(path, name="block", **kwargs):
-        r = Raw(path, name, **kwargs)
-        opened.append(r)
-        return r
-
-    yield open_
-    for r in opened:
-        r.close()
+def raw(raw_instances):
+    """Instances with the fast path on (default) or off (``fast=False``)."""
+    def open_(path, name="block", fast=True, **kwargs):
+        instance = raw_instances(path, name, fast=fast, **kwargs)
+        assert instance.component, instance.messages
+        return instance
+    return open_
 
 
 def bits(values) -> np.ndarray:
@@ -170,7 +60,7 @@ def frames_dropped(messages) -> list:
     return kept
 
 
-def starts(r: Raw, names) -> np.ndarray:
+def starts(r: RawInstance, names) -> np.ndarray:
     return np.array([float(r.variables[n].start) for n in names])
 
 
@@ -214,7 +104,7 @@ def test_the_fast_path_can_be_switched_off_and_a_slave_outside_a_fmu_has_none(fm
 @pytest.mark.parametrize("robot, block", HOT + robot_blocks(kinds=("ik",)))
 def test_set_get_round_trip_is_exact(fmu_root, raw, robot, block, rng):
     r = raw(fmu_root / robot / f"{block}.fmu")
-    r.initialize()
+    assert r.initialize() == OK, r.messages
     inputs = r.names("Real", "input")
     values = starts(r, inputs) * (1 + 1e-3 * rng.standard_normal(len(inputs)))
     values[0] = -0.0
@@ -237,7 +127,7 @@ def test_a_twin_without_the_fast_path_gives_the_same_bits_statuses_and_messages(
     fast, slow = raw(path, fast=True), raw(path, fast=False)
     assert fast.fast_path and not slow.fast_path
     for r in (fast, slow):
-        r.initialize()
+        assert r.initialize() == OK, r.messages
     inputs, reals, booleans = fast.names("Real", "input"), fast.names("Real"), fast.names("Boolean")
     base = starts(fast, inputs)
     t = 0.0
@@ -276,7 +166,7 @@ def test_a_twin_without_the_fast_path_gives_the_same_bits_statuses_and_messages(
 @pytest.mark.parametrize("robot, block", WITH_BOOLEANS)
 def test_a_boolean_get(fmu_root, raw, robot, block):
     r = raw(fmu_root / robot / f"{block}.fmu")
-    r.initialize()
+    assert r.initialize() == OK, r.messages
     booleans = r.names("Boolean")
     status, values = r.get_boolean(booleans)
     assert status == OK and r.fast_calls == 1
@@ -298,7 +188,7 @@ def test_a_boolean_get(fmu_root, raw, robot, block):
 @pytest.mark.parametrize("robot, block", HOT)
 def test_set_real_of_an_output_or_a_boolean_fails_naming_the_variable(fmu_root, raw, robot, block):
     r = raw(fmu_root / robot / f"{block}.fmu")
-    r.initialize()
+    assert r.initialize() == OK, r.messages
     inputs, output = r.names("Real", "input"), r.names("Real", "output")[0]
     before = r.get_real(inputs)[1]
     assert r.set_real([inputs[0], output], [1.25, 2.5]) == ERROR
@@ -322,7 +212,7 @@ def test_set_real_of_an_output_or_a_boolean_fails_naming_the_variable(fmu_root, 
 @pytest.mark.parametrize("robot, block", HOT)
 def test_a_non_finite_input_fails_the_next_step_with_its_message_logging_off(fmu_root, raw, robot, block):
     r = raw(fmu_root / robot / f"{block}.fmu", logging_on=False)
-    r.initialize()
+    assert r.initialize() == OK, r.messages
     inputs = r.names("Real", "input")
     values = starts(r, inputs)
     assert r.step(0.0) == OK
@@ -370,7 +260,7 @@ def test_reset_constructs_the_slave_anew_and_it_registers_again(fmu_root, raw):
 @pytest.mark.parametrize("serialized", [False, True], ids=["state", "serialized"])
 def test_state_restore_then_the_same_steps_give_the_same_bits(fmu_root, raw, robot, block, serialized, rng):
     r = raw(fmu_root / robot / f"{block}.fmu")
-    r.initialize()
+    assert r.initialize() == OK, r.messages
     inputs, reals = r.names("Real", "input"), r.names("Real")
     base = starts(r, inputs)
     series = [base + 1e-2 * rng.standard_normal(len(inputs)) for _ in range(12)]

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import ctypes
 import math
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -26,94 +25,26 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import calloc, extract, free, read_model_description, simulate_fmu
+from fmpy import read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2True)
 
 import robofmu.components.fmi.base as base
 from robofmu.system import fmi_export
 
-OK, WARNING, DISCARD, ERROR, FATAL = range(5)
-LABEL = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
-H = 1e-3
+from fmu_util import DISCARD, ERROR, FATAL, H, LABEL, OK, RawInstance, keep_alive
 
 # base.py opts in by logging failures with the status category; until it does, the FMUs' calls
 # keep pythonfmu's statuses (the library forwards them unchanged) and these checks must fail.
 needs_base = pytest.mark.xfail(not hasattr(base, "STATUS_CATEGORY"), strict=True,
                                reason="components/fmi/base.py does not log with robofmu's status category yet")
 
-# Loggers stay alive for the whole session: a FMU may log through one after its test ended.
-_KEEP: list = []
-
-
-class Importer:
-    """One co-simulation instance through fmpy's FMU2Slave, recording every logged message;
-    :meth:`call` returns an FMI function's raw status."""
-
-    def __init__(self, path: Path, name: str, logging_on: bool = False):
-        self.messages: list[tuple[str, str | None, str]] = []
-        md = read_model_description(str(path), validate=False)
-        self.vr = {v.name: v.valueReference for v in md.modelVariables}
-        self.dir = extract(str(path))
-        self.slave = FMU2Slave(guid=md.guid, unzipDirectory=self.dir,
-                               modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        _KEEP.append(self.callbacks)
-        self.component = self.slave.fmi2Instantiate(name.encode(), 1, md.guid.encode(),
-                                                    (Path(self.dir) / "resources").as_uri().encode(),
-                                                    ctypes.byref(self.callbacks), 0, int(logging_on))
-
-    def _log(self, env, instance, status, category, message):
-        self.messages.append((LABEL[status], category.decode() if category else None,
-                              message.decode(errors="replace") if message else ""))
-
-    def call(self, function: str, *args) -> int:
-        return self.slave._functions[function](self.component, *args)
-
-    def set_real(self, name: str, value: float) -> int:
-        return self.call("fmi2SetReal", (ctypes.c_uint * 1)(self.vr[name]), 1, (ctypes.c_double * 1)(value))
-
-    def get_real(self, name: str) -> tuple[int, float]:
-        value = (ctypes.c_double * 1)()
-        status = self.call("fmi2GetReal", (ctypes.c_uint * 1)(self.vr[name]), 1, value)
-        return status, value[0]
-
-    def initialize(self, parameters: dict | None = None) -> int:
-        assert self.call("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0) == OK
-        assert self.call("fmi2EnterInitializationMode") == OK
-        for name, value in (parameters or {}).items():
-            assert self.set_real(name, value) == OK
-        return self.call("fmi2ExitInitializationMode")
-
-    def step(self, t: float, h: float = H) -> int:
-        return self.call("fmi2DoStep", t, h, fmi2True)
-
-    def texts(self, *statuses: str) -> list[str]:
-        return [m for s, _, m in self.messages if not statuses or s in statuses]
-
-    def close(self) -> None:
-        if self.component:
-            self.slave.fmi2FreeInstance(self.component)
-        self.slave.freeLibrary()
-        shutil.rmtree(self.dir, ignore_errors=True)
-
 
 @pytest.fixture
-def importer():
-    opened = []
-
+def importer(raw_instances):
+    """Instances as an importer makes them (the fast path as the environment says)."""
     def open_(path, name="probe", logging_on=False):
-        i = Importer(path, name, logging_on)
-        opened.append(i)
-        return i
-
-    yield open_
-    for i in opened:
-        i.close()
+        return raw_instances(path, name, logging_on=logging_on)
+    return open_
 
 
 @pytest.fixture(scope="session")
@@ -173,7 +104,7 @@ def test_without_pythonfmus_library_instantiation_fails_naming_it(plant, tmp_pat
         for item in zin.infolist():
             if not item.filename.endswith(fmi_export.STOCK_LIBRARY):
                 zout.writestr(item, zin.read(item.filename))
-    i = Importer(broken, "plant")
+    i = RawInstance(broken, "plant")
     try:
         assert not i.component
         assert any(s == "FATAL" and "cannot load" in m and fmi_export.STOCK_LIBRARY in m
@@ -188,7 +119,7 @@ def test_refused_step_message_reaches_the_logger(importer, plant, logging_on):
     p = importer(plant, "plant", logging_on)
     assert p.initialize() == OK
     assert p.step(0.0) == OK
-    assert p.set_real("tau[1]", math.nan) == OK
+    assert p.set_real(["tau[1]"], [math.nan]) == OK
     p.step(H)
     assert any(s == "ERROR" and c == "logStatusError" and "input tau[1] = nan at t = 0.001 s is not finite; "
                "step refused" in m for s, c, m in p.messages), p.messages
@@ -201,7 +132,7 @@ def test_refused_step_is_an_error_not_a_discard(importer, plant, logging_on):
     p = importer(plant, "plant", logging_on)
     assert p.initialize() == OK
     assert p.step(0.0) == OK
-    assert p.set_real("tau[1]", math.nan) == OK
+    assert p.set_real(["tau[1]"], [math.nan]) == OK
     assert p.step(H) == ERROR
 
 
@@ -216,7 +147,7 @@ def test_simulate_fmu_raises_instead_of_truncating(plant):
     def logger(env, instance, status, category, message):
         messages.append((status, message.decode()))
 
-    _KEEP.append(logger)
+    keep_alive(logger)
     with pytest.raises(FMICallException, match=r"fmi2DoStep failed with status 3 \(error\)"):
         simulate_fmu(str(plant), stop_time=0.01, step_size=H, debug_logging=False, logger=logger,
                      input=np.array(rows, dtype=[("time", float)] + [(n, float) for n in names]))
@@ -237,11 +168,11 @@ def test_invalid_parameter_is_an_error_naming_it(importer, plant):
 def test_a_rejected_set_is_an_error_and_the_instance_goes_on(importer, plant):
     p = importer(plant, "plant")
     assert p.initialize() == OK
-    assert p.set_real("g", 1.0) == ERROR                         # a parameter, once initialized
+    assert p.set_real(["g"], [1.0]) == ERROR                         # a parameter, once initialized
     assert any("fmi2SetReal: value references of ['g'] do not name Real inputs" in m for m in p.texts("ERROR"))
     assert not p.texts("FATAL")
     assert p.step(0.0) == OK                                     # still usable
-    status, q = p.get_real("q[1]")
+    status, (q,) = p.get_real(["q[1]"])
     assert status == OK and math.isfinite(q)
     assert p.call("fmi2Terminate") == OK
 
@@ -301,8 +232,8 @@ def probe(tmp_path_factory) -> Path:
     return path
 
 
-def _requested(p: Importer, status: int) -> int:
-    return p.call("fmi2SetInteger", (ctypes.c_uint * 1)(p.vr["request"]), 1, (ctypes.c_int * 1)(status))
+def _requested(p: RawInstance, status: int) -> int:
+    return p.call("fmi2SetInteger", p.refs(["request"]), 1, (ctypes.c_int * 1)(status))
 
 
 @pytest.mark.parametrize("status", [DISCARD, ERROR, FATAL])
@@ -362,7 +293,7 @@ def test_a_percent_is_shown_as_one_through_fmpys_formatting_logger(probe, tmp_pa
     def logger(env, instance, status, category, message):
         seen.append(message.decode())
 
-    _KEEP.append(logger)
+    keep_alive(logger)
     simulate_fmu(str(probe), stop_time=2 * H, step_size=H, debug_logging=True, logger=logger)
     assert "stepping 100% fine" in seen, seen
 
@@ -372,6 +303,6 @@ def test_pythonfmus_fatal_error_reaches_the_logger_with_the_exception(importer, 
     fmi2Fatal, and with loggingOn = false its text reaches the logger."""
     p = importer(probe)
     assert p.initialize() == OK
-    assert p.set_real("boom", 1.0) == FATAL
+    assert p.set_real(["boom"], [1.0]) == FATAL
     assert any(s == "FATAL" and "Fatal py exception encountered: [setReal]" in m and "boom = 1.0" in m
                for s, _, m in p.messages), p.messages

@@ -24,9 +24,9 @@ comment says exactly what it changes; in short:
 - messages of status warning and above always reach the importer's logger, OK messages only
   with loggingOn (and its categories, if set);
 - the fast path: robofmu's slave registers with it during fmi2Instantiate (its values array,
-  masks, shared flags and two callables), and it then serves fmi2SetReal of inputs,
-  fmi2GetReal, fmi2GetBoolean and fmi2DoStep of an initialized instance without pythonfmu's
-  per-call Python lists; every other call, and any with a value reference it does not serve,
+  masks, shared flags, three callables and NumPy's error state), and it then serves
+  fmi2SetReal of inputs, fmi2GetReal, fmi2GetBoolean and fmi2DoStep of an initialized
+  instance without pythonfmu's per-call Python lists; every other call, and any with a value reference it does not serve,
   still goes to pythonfmu. ``ROBOFMU_FMI_FAST_PATH=0`` in the environment at instantiation
   switches it off.
 """

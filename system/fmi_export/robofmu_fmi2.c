@@ -552,8 +552,8 @@ static int fast_all(const FastShared* shared, const unsigned char* mask, const f
     return 1;
 }
 
-/* A Python call's result (a new reference or NULL), with the GIL held: FAST_OK and
-   FAST_MESSAGES bits, or -1 if it raised (cleared: the slave's callables catch everything, so
+/* A Python call's result (a new reference or NULL), with the GIL held: FAST_OK,
+   FAST_MESSAGES and FAST_CHECK bits, or -1 if it raised (cleared: the slave's callables catch everything, so
    this is a bug) or returned no int. */
 static int fast_result(PyObject* result)
 {

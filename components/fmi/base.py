@@ -280,7 +280,7 @@ class BlockSlave(Fmi2Slave):
         try:
             if (shared.inputs_checked and self._bad_output is None          # the usual case of do_step
                     and not (shared.dirty and self._feedthrough) and 0.0 < step_size < math.inf
-                    and abs(current_time - self.time) <= 1e-9 * max(1.0, abs(self.time))):
+                    and self._at_own_time(current_time)):
                 try:
                     self._advance_now(current_time, step_size)
                 except Exception as exc:
@@ -572,18 +572,22 @@ class BlockSlave(Fmi2Slave):
         self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
         return True
 
+    def _at_own_time(self, t: float) -> bool:
+        """Whether a step from ``t`` continues from the instance's time (to 1e-9 s, relative
+        beyond 1 s; False for a non-finite ``t``)."""
+        return abs(t - self.time) <= 1e-9 * max(1.0, abs(self.time))
+
     def _step_problem(self, current_time: float, step_size: float) -> str | None:
         """Why ``fmi2DoStep(current_time, step_size)`` cannot run now, or None."""
-        if (self._shared.active and 0.0 < step_size < math.inf      # the usual case, in one test
-                and abs(current_time - self.time) <= 1e-9 * max(1.0, abs(self.time))):
-            return None
+        if self._shared.active and 0.0 < step_size < math.inf and self._at_own_time(current_time):
+            return None                                              # the usual case, in one test
         if self._terminated:
             return "fmi2DoStep: the instance is terminated"
         if not self._initialized:
             return "fmi2DoStep: called before fmi2ExitInitializationMode"
         if not (math.isfinite(step_size) and step_size > 0.0):
             return f"fmi2DoStep: communication step h = {step_size} s is invalid: must be finite and > 0"
-        if not math.isfinite(current_time) or abs(current_time - self.time) > 1e-9 * max(1.0, abs(self.time)):
+        if not self._at_own_time(current_time):
             return (f"fmi2DoStep: communication point t = {current_time!r} s does not continue from the "
                     f"instance's time {self.time!r} s (restore a saved FMU state to go back)")
         return None

@@ -32,10 +32,7 @@ from __future__ import annotations
 import ctypes
 import math
 import os
-import signal
-import threading
 import time as _time
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
@@ -46,6 +43,7 @@ from fmpy.fmi2 import fmi2Boolean, fmi2Component, fmi2Real, fmi2Status, fmi2True
 from .check import DiagramError, Link, Node, Plan, plan, step_count, variable_unit
 from .diagram import System, select, unmatched
 from .fmu import STATUS, Block, FMUError, LogMessage
+from .interrupt import sigint_flag
 from .result import Result
 
 __all__ = ["ALGORITHMS", "DiagramError", "Interrupted", "Master", "Result", "SimulationError", "available_memory",
@@ -120,32 +118,6 @@ def _gigabytes(n: int) -> str:
     for size, unit in ((1e12, "TB"), (1e9, "GB"), (1e6, "MB")):
         if n >= size or unit == "MB":
             return f"{n / size:.3g} {unit}"
-
-
-@contextmanager
-def _sigint_flag():
-    """While the block runs, SIGINT sets ``flag[0]`` instead of raising KeyboardInterrupt.
-
-    A KeyboardInterrupt raised inside an FMU's Python code would take pythonfmu's exception
-    path (see docs/design.md), so the run only notes the signal and the loop stops at the next
-    communication point. The previous handler is restored afterwards. Outside the main thread,
-    or when the current handler was not installed from Python, nothing is installed.
-    """
-    flag = [False]
-    previous = None
-    installed = False
-    if threading.current_thread() is threading.main_thread():
-        previous = signal.getsignal(signal.SIGINT)
-        if previous is not None:
-            def note(signum, frame):
-                flag[0] = True
-            signal.signal(signal.SIGINT, note)
-            installed = True
-    try:
-        yield flag
-    finally:
-        if installed:
-            signal.signal(signal.SIGINT, previous)
 
 
 class Master:
@@ -299,7 +271,7 @@ class Master:
         problem = self.memory_problem(n_steps)
         if problem:
             raise ValueError(problem)
-        with _sigint_flag() as interrupted:
+        with sigint_flag() as interrupted:     # the loop stops at the next point (no exception in a FMU)
             try:
                 self._instantiate(start_time, stop_time)
                 if interrupted[0]:
@@ -584,7 +556,7 @@ class _Fmi2Functions:
 
 
 def _bind(library: ctypes.CDLL, name: str):
-    function = library[name]            # no argtypes: see _Fmi2Functions (the types: _PROTOTYPES)
+    function = library[name]            # no argtypes: see _Fmi2Functions (the C types: above it)
     function.restype = fmi2Status
     return function
 

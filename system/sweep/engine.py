@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
 import sys
-import threading
 import time
 from contextlib import contextmanager
 from typing import Callable
+
+from ..interrupt import sigint_flag
 
 __all__ = ["PRELOAD", "SweepProgress", "cluster_client", "default_workers", "execute"]
 
@@ -131,28 +131,8 @@ def execute(client, system, runs: list[tuple[int, dict]], stop_time, step, keep_
     a Ctrl-C whose KeyboardInterrupt some library code swallowed still stops the sweep at the
     next record (the SIGINT handler also sets a flag, checked after every record).
     """
-    with _interrupt_flag() as interrupted:
+    with sigint_flag(raise_interrupt=True) as interrupted:
         _execute(client, system, runs, stop_time, step, keep_folder, on_record, tag, interrupted)
-
-
-@contextmanager
-def _interrupt_flag():
-    """A flag SIGINT sets (besides raising KeyboardInterrupt, as Python's own handler does);
-    installed in the main thread only, the previous handler restored after."""
-    flag = threading.Event()
-    if threading.current_thread() is not threading.main_thread():
-        yield flag
-        return
-
-    def on_sigint(signum, frame):
-        flag.set()
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    try:
-        yield flag
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def _execute(client, system, runs, stop_time, step, keep_folder, on_record, tag, interrupted) -> None:
@@ -179,7 +159,7 @@ def _execute(client, system, runs, stop_time, step, keep_folder, on_record, tag,
                 record = dict(values, status="failed", message=reason)
             future.release()
             on_record(index, record)
-            if interrupted.is_set():
+            if interrupted[0]:
                 raise KeyboardInterrupt
     except BaseException:
         client.cancel(list(futures), force=True)

@@ -129,6 +129,10 @@ class InProcessDiagram:
             phase[link.target].append(link)
         self.early = {name: self._wires(links) for name, links in early.items()}
         self.late = [w for name in self.order for w in self._wires(late[name])]
+        self._pass = []                   # evaluate(t) as one flat list: (op, takes t), in order
+        for name in self.order:
+            self._pass += [(wire.apply, False) for wire in self.early[name]] + [(self.blocks[name].output, True)]
+        self._pass += [(wire.apply, False) for wire in self.late]
         self.columns = self._recorded()
 
     def _wires(self, links) -> list[_Wire]:
@@ -171,12 +175,11 @@ class InProcessDiagram:
 
     def evaluate(self, t: float) -> None:
         """One Gauss-Seidel pass at ``t``: every block's outputs, then the late inputs."""
-        for name in self.order:
-            for wire in self.early[name]:
-                wire.apply()
-            self.blocks[name].output(t)
-        for wire in self.late:
-            wire.apply()
+        for op, timed in self._pass:
+            if timed:
+                op(t)
+            else:
+                op()
 
     def _row(self, out: np.ndarray) -> None:
         np.concatenate(self._sources, out=self._stacked)      # every block's values, then one gather
@@ -197,19 +200,11 @@ class InProcessDiagram:
         times = start_time + h * np.arange(n_steps + 1)
         data = np.empty((n_steps + 1, len(self.columns)))
         blocks = [self.blocks[name] for name in self.order]
-        outputs = []                       # evaluate(t) as one flat list: wires, then outputs
-        for name in self.order:
-            outputs += [(wire.apply, False) for wire in self.early[name]] + [(self.blocks[name].output, True)]
-        outputs += [(wire.apply, False) for wire in self.late]
         advances = [block.advance for block in blocks]
         t_block = times[0]                 # the blocks' own time: t_k + h after a step, as in a FMU
         wall = _time.perf_counter()
         for k in range(n_steps + 1):
-            for op, timed in outputs:
-                if timed:
-                    op(t_block)
-                else:
-                    op()
+            self.evaluate(t_block)
             self._row(data[k])
             if k == n_steps:
                 break

@@ -30,7 +30,7 @@ import numpy as np
 import robofmu.components  # noqa: F401  (the installed copy before any bundled one)
 from robofmu.components.blocks import make_block
 from robofmu.components.fmi.base import _FAST_CHECK, BlockSlave
-from robofmu.components.fmi.quiet import ERROR_STATE
+from robofmu.components.fmi.quiet import quietly
 from robofmu.system import experiment
 from robofmu.system.fmu import Block
 from robofmu.system.master import Master, _Fmi2Functions
@@ -84,14 +84,13 @@ def main(argv=None) -> int:
         slave.exit_initialization_mode()
         slave_clock = [0]
 
-        slots_in, slots_out = np.array(vin, dtype=np.intp), np.array(vout + vbool, dtype=np.intp)
-        start_in, read = np.array(values), np.zeros(len(vout) + len(vbool))
+        slots_in, start_in = np.array(vin, dtype=np.intp), np.array(values)
 
         # The slave as robofmu's export library calls it on its fast path (robofmu_fmi2.c); the
         # library's own share (copying values in and out, saving them before a refresh, checking
         # the outputs, NumPy's error state) is C, counted in the boundary: here only the part
         # without which the slave would not take its usual way (the outputs current after a
-        # checked refresh), NumPy's error state set once around all steps (ERROR_STATE).
+        # checked refresh), NumPy's error state set once around all steps (quietly).
         slave._output_now, slave._advance_now = slave.logic.output, slave.logic.advance
 
         def in_process(k, slave=slave, clock=slave_clock, shared=slave._shared, held=slave.values):
@@ -133,12 +132,7 @@ def main(argv=None) -> int:
             t_logic, t_slave, t_fmi = (float("inf"),) * 3
             for _ in range(args.repeats):        # taking turns: load on the machine hits all three alike
                 t_logic = min(t_logic, best_of(direct, args.steps, 1))
-                token = ERROR_STATE[0].set(ERROR_STATE[1]) if ERROR_STATE else None
-                try:
-                    t_slave = min(t_slave, best_of(in_process, args.steps, 1))
-                finally:
-                    if token is not None:
-                        ERROR_STATE[0].reset(token)
+                t_slave = min(t_slave, quietly(best_of, in_process, args.steps, 1))
                 t_fmi = min(t_fmi, best_of(through_fmi, args.steps, 1))
         finally:
             fmu.close()

@@ -93,8 +93,10 @@ from __future__ import annotations
 
 import itertools
 import math
+import operator
 
 import numpy as np
+from scipy.linalg.lapack import dgesv as gesv
 
 from .description import DescriptionError, RobotDescription
 from .model import RobotModel, derivative_unit
@@ -153,7 +155,9 @@ class Planar3RRP(RobotModel):
         self.alpha = np.array(mech.line_offsets, dtype=float)
         self._sin_offsets = math.sin(self.alpha[1] - self.alpha[0])      # +/- sqrt(3)/2
         self._cos_alpha, self._sin_alpha = np.cos(self.alpha), np.sin(self.alpha)
+        self._offsets = tuple(tuple(v.tolist()) for v in (self.alpha, self._cos_alpha, self._sin_alpha))
         self.link_inertia_O = float(mech.link_inertia_about_origin)
+        self._links_mass = self.link_inertia_O * np.eye(3)            # I_O 1, the links' part of M
         self._ee_mass, self._ee_inertia = float(mech.ee_mass), float(mech.ee_inertia)
         self._lower = np.array(mech.position_lower, dtype=float)
         self._upper = np.array(mech.position_upper, dtype=float)
@@ -182,6 +186,7 @@ class Planar3RRP(RobotModel):
             raise DescriptionError(path, "configurations.home", f"q = {list(home)} is a direct singularity "
                                    "(no pose)")
         self.payload = 0.0
+        self._inertia = self.end_effector_inertia          # diag(M_E), kept with the payload
         self.set_gravity(description.gravity if gravity is None else gravity)
 
     # -- units, limits, parameters ----------------------------------------------------------------
@@ -211,6 +216,7 @@ class Planar3RRP(RobotModel):
         if not (math.isfinite(mass) and mass >= 0.0):
             raise ValueError(f"payload mass must be finite and >= 0 kg, got {mass}")
         self.payload = mass
+        self._inertia = self.end_effector_inertia
 
     def independent_dynamics(self, **baumgarte):
         """A second, independent formulation of this mechanism's dynamics, for cross-checks:
@@ -229,110 +235,118 @@ class Planar3RRP(RobotModel):
         m = self._ee_mass + self.payload
         return np.array([m, m, self._ee_inertia])
 
-    # -- geometry: leg-first arrays ------------------------------------------------------------------
-    # Internally every per-leg quantity has the leg on axis 0 and the configurations on the
-    # trailing axes, shape (3, ...): per-configuration quantities (x, y, theta, ...) of shape (...)
-    # then broadcast against them, and NumPy's inner loops run over the configurations, not over
-    # three legs. A single configuration is the case ... = ().
-    def _legwise(self, v: np.ndarray, nd: int) -> np.ndarray:
-        """A per-leg constant (3,) shaped (3, 1, ...) for ``nd`` configuration axes."""
-        return v.reshape((3,) + (1,) * nd)
-
+    # -- geometry, leg by leg ----------------------------------------------------------------------
+    # The kinematics is written once, leg by leg: a per-leg quantity is a sequence of three values,
+    # each a float (one configuration: plain float arithmetic, math's functions) or an array over
+    # the configurations (the *_many methods: each leg's values one contiguous array, NumPy's
+    # functions). Sums over the legs are written out in leg order (what .sum over a leg axis does).
     def _direct_measure(self, q: np.ndarray) -> np.ndarray:
         """|V| = |sum_i exp(j (q_i - alpha_i))| = sum_i c_i for q (..., 3): 0 at a direct
         singularity, at most 3."""
-        d = np.moveaxis(np.asarray(q, dtype=float), -1, 0) - self._legwise(self.alpha, np.ndim(q) - 1)
+        d = np.moveaxis(np.asarray(q, dtype=float), -1, 0) - self.alpha.reshape((3,) + (1,) * (np.ndim(q) - 1))
         return np.hypot(np.sin(d).sum(0), np.cos(d).sum(0))
 
-    def _pose(self, qT: np.ndarray):
-        """(sd, cd, V, S, C, theta, x, y) at leg-first qT (3, ...): sd, cd = sin, cos(q_i - alpha_i)
-        (the only trigonometric evaluations), S, C their sums, V = hypot(S, C); NaN where V is at
-        or below :data:`DIRECT_SINGULARITY`.
+    def _pose(self, q):
+        """(sd, cd, V, S, C, theta, x, y) at the legs' angles q (three values): sd, cd = sin,
+        cos(q_i - alpha_i) (the only trigonometric evaluations), S, C their sums, V = hypot(S, C);
+        NaN where V is at or below :data:`DIRECT_SINGULARITY`.
 
         With cos, sin theta = C/V, S/V the sums of Z = 2/3 sum_i b_i n_i are quadratic forms in
         (C, S) over V^2, with the coefficients A1, A2 = sum_i sd_i (cos, sin) alpha_i and
         B1, B2 = sum_i cd_i (cos, sin) alpha_i."""
-        nd = qT.ndim - 1
-        ca, sa = self._legwise(self._cos_alpha, nd), self._legwise(self._sin_alpha, nd)
-        d = qT - self._legwise(self.alpha, nd)
-        sd, cd = np.sin(d), np.cos(d)
-        S, C = sd.sum(0), cd.sum(0)
-        A1, A2 = (sd * ca).sum(0), (sd * sa).sum(0)
-        B1, B2 = (cd * ca).sum(0), (cd * sa).sum(0)
+        f = _functions(q[0])
+        (a1, a2, a3), (ca1, ca2, ca3), (sa1, sa2, sa3) = self._offsets
+        d1, d2, d3 = q[0] - a1, q[1] - a2, q[2] - a3
+        sd = (f.sin(d1), f.sin(d2), f.sin(d3))
+        cd = (f.cos(d1), f.cos(d2), f.cos(d3))
+        S, C = sd[0] + sd[1] + sd[2], cd[0] + cd[1] + cd[2]
+        A1, A2 = sd[0] * ca1 + sd[1] * ca2 + sd[2] * ca3, sd[0] * sa1 + sd[1] * sa2 + sd[2] * sa3
+        B1, B2 = cd[0] * ca1 + cd[1] * ca2 + cd[2] * ca3, cd[0] * sa1 + cd[1] * sa2 + cd[2] * sa3
         V2 = S * S + C * C
-        V2 = np.where(V2 > DIRECT_SINGULARITY ** 2, V2, np.nan)
+        V2 = f.singular_to_nan(V2)
         CS, CC, SS = C * S, C * C, S * S
         k = (2.0 * self.r / 3.0) / V2
         x = -k * (CS * (A1 - B2) + CC * A2 - SS * B1)
         y = k * (CC * A1 - CS * (A2 + B1) + SS * B2)
-        theta = np.arctan2(S, C) + 0.0 * V2             # NaN where singular
-        return sd, cd, np.sqrt(V2), S, C, theta, x, y
+        theta = f.atan2(S, C) + 0.0 * V2                 # NaN where singular
+        return sd, cd, f.sqrt(V2), S, C, theta, x, y
 
-    def _directions(self, V, S, C, nd):
-        """(cp, sp): cos, sin phi_i = cos, sin(theta + alpha_i), shape (3, ...)."""
-        ca, sa = self._legwise(self._cos_alpha, nd), self._legwise(self._sin_alpha, nd)
+    def _directions(self, V, S, C):
+        """(cp, sp): cos, sin phi_i = cos, sin(theta + alpha_i), three values each."""
+        _, (ca1, ca2, ca3), (sa1, sa2, sa3) = self._offsets
         ct, st = C / V, S / V
-        return ct * ca - st * sa, st * ca + ct * sa
+        return ((ct * ca1 - st * sa1, ct * ca2 - st * sa2, ct * ca3 - st * sa3),
+                (st * ca1 + ct * sa1, st * ca2 + ct * sa2, st * ca3 + ct * sa3))
 
-    def _legs(self, qT: np.ndarray) -> "_Legs":
-        """Everything the kinematics needs at leg-first qT (see the module docstring's notation)."""
-        sd, cd, V, S, C, theta, x, y = self._pose(qT)
-        cp, sp = self._directions(V, S, C, qT.ndim - 1)   # u = (cp, sp), n = (-sp, cp)
+    def _legs(self, q) -> "_Legs":
+        """Everything the kinematics needs at the legs' angles q (see the module docstring's notation)."""
+        sd, cd, V, S, C, theta, x, y = self._pose(q)
+        cp, sp = self._directions(V, S, C)               # u = (cp, sp), n = (-sp, cp)
         ct, st = C / V, S / V
-        c = cd * ct + sd * st                             # cos(q_i - phi_i)
-        b = self.r * (sd * ct - cd * st)                  # r sin(q_i - phi_i)
-        s = self.r * c - (cp * x + sp * y)
+        r = self.r
+        c = tuple(cd[i] * ct + sd[i] * st for i in range(3))            # cos(q_i - phi_i)
+        b = tuple(r * (sd[i] * ct - cd[i] * st) for i in range(3))      # r sin(q_i - phi_i)
+        s = tuple(r * c[i] - (cp[i] * x + sp[i] * y) for i in range(3))
         return _Legs(theta, V, x, y, cp, sp, c, b, s)
 
-    def _jacobian_from(self, V, x, y, cp, sp, c) -> np.ndarray:
-        """J = A^-1 B written out, shape (3, 3, ...): theta row gamma_j = c_j / sum_i c_i
-        (sum_i c_i = V), Z rows 2/3 (r c_j n_j - gamma_j sum_i s_i n_i), where
-        sum_i s_i n_i = r sum_i c_i n_i - 3/2 (-y, x) (sum_i n_i u_i^T = 3/2 [[0, -1], [1, 0]])."""
-        J = np.empty((3,) + c.shape)
-        gamma = np.divide(c, V, out=J[2])
-        rc = (2.0 * self.r / 3.0) * c
-        snx = (2.0 / 3.0) * (-self.r * (c * sp).sum(0) + 1.5 * y)
-        sny = (2.0 / 3.0) * (self.r * (c * cp).sum(0) - 1.5 * x)
-        np.subtract(-rc * sp, gamma * snx, out=J[0])
-        np.subtract(rc * cp, gamma * sny, out=J[1])
-        return J
+    def _jacobian_from(self, V, x, y, cp, sp, c) -> list:
+        """J = A^-1 B written out, rows (x, y, theta) of three columns each: theta row
+        gamma_j = c_j / sum_i c_i (sum_i c_i = V), Z rows 2/3 (r c_j n_j - gamma_j sum_i s_i n_i),
+        where sum_i s_i n_i = r sum_i c_i n_i - 3/2 (-y, x) (sum_i n_i u_i^T = 3/2 [[0, -1], [1, 0]])."""
+        r = self.r
+        gamma = [c[j] / V for j in range(3)]
+        rc = [(2.0 * r / 3.0) * c[j] for j in range(3)]
+        snx = (2.0 / 3.0) * (-r * (c[0] * sp[0] + c[1] * sp[1] + c[2] * sp[2]) + 1.5 * y)
+        sny = (2.0 / 3.0) * (r * (c[0] * cp[0] + c[1] * cp[1] + c[2] * cp[2]) - 1.5 * x)
+        return [[-rc[j] * sp[j] - gamma[j] * snx for j in range(3)],
+                [rc[j] * cp[j] - gamma[j] * sny for j in range(3)],
+                gamma]
 
-    def _jacobian(self, k: "_Legs") -> np.ndarray:
+    def _jacobian(self, k: "_Legs") -> list:
         return self._jacobian_from(k.V, k.x, k.y, k.cp, k.sp, k.c)
 
-    def _solve_a(self, k: "_Legs", h: np.ndarray) -> np.ndarray:
-        """A^-1 h, A rows (n_i^T, s_i): h has the legs on axis 0, optionally a column axis, then
-        the configuration axes; returns rows (x, y, theta) on axis 0 and the rest alike.
+    @staticmethod
+    def _solve_a(k: "_Legs", h) -> list:
+        """A^-1 h for one right-hand side h (three values, one per leg), A rows (n_i^T, s_i);
+        returns (x, y, theta).
 
         Summing the rows (sum_i n_i = 0) gives w = sum_i h_i / sum_i s_i; then n_i . v = h_i - s_i w
         is consistent and v = 2/3 sum_i (h_i - s_i w) n_i (sum_i n_i n_i^T = 3/2 I)."""
-        extra = (slice(None),) + (None,) * (h.ndim - k.s.ndim)
-        s, cp, sp = k.s[extra], k.cp[extra], k.sp[extra]
-        w = h.sum(0) / s.sum(0)
-        hp = h - s * w
-        return np.stack([-(2.0 / 3.0) * (hp * sp).sum(0), (2.0 / 3.0) * (hp * cp).sum(0), w])
+        s, cp, sp = k.s, k.cp, k.sp
+        w = (h[0] + h[1] + h[2]) / (s[0] + s[1] + s[2])
+        hp = [h[i] - s[i] * w for i in range(3)]
+        return [-(2.0 / 3.0) * (hp[0] * sp[0] + hp[1] * sp[1] + hp[2] * sp[2]),
+                (2.0 / 3.0) * (hp[0] * cp[0] + hp[1] * cp[1] + hp[2] * cp[2]), w]
 
     @staticmethod
-    def _times(J: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """J v for leg-first J (3, 3, ...) and v (3, ...)."""
-        return (J * v[None]).sum(1)
+    def _times(J, v) -> list:
+        """J v for J as rows of three values and v three values."""
+        return [row[0] * v[0] + row[1] * v[1] + row[2] * v[2] for row in J]
 
-    def _jdot_qdot(self, k: "_Legs", J: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def _jdot_qdot(self, k: "_Legs", J, qd) -> list:
         """Jdot qd = A^-1 h, h_i = -b_i qd_i^2 + 2 b_i thetad qd_i + 2 thetad u_i . Zd."""
         zx, zy, thd = self._times(J, qd)
-        h = -k.b * qd * qd + 2.0 * k.b * thd * qd + 2.0 * thd * (k.cp * zx + k.sp * zy)
+        b, cp, sp = k.b, k.cp, k.sp
+        h = [-b[i] * qd[i] * qd[i] + 2.0 * b[i] * thd * qd[i] + 2.0 * thd * (cp[i] * zx + sp[i] * zy)
+             for i in range(3)]
         return self._solve_a(k, h)
 
-    def _jacobian_dot(self, k: "_Legs", J: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def _jacobian_dot(self, k: "_Legs", J, qd) -> list:
         """Jdot = A^-1 (Bdot - Adot J), Bdot = diag(-b_i (qd_i - thetad)), Adot rows
-        (-thetad u_i^T, sd_i), sd_i = -b_i qd_i - u_i . Zd; shape (3, 3, ...)."""
+        (-thetad u_i^T, sd_i), sd_i = -b_i qd_i - u_i . Zd; rows (x, y, theta) of three columns."""
         zx, zy, thd = self._times(J, qd)
-        bdot = -k.b * (qd - thd)
-        sdot = -k.b * qd - (k.cp * zx + k.sp * zy)
-        adot_j = (-thd * (k.cp[:, None] * J[0][None] + k.sp[:, None] * J[1][None])
-                  + sdot[:, None] * J[2][None])                      # (leg i, column j, ...)
-        eye = np.eye(3).reshape((3, 3) + (1,) * (qd.ndim - 1))
-        return self._solve_a(k, eye * bdot[:, None] - adot_j)
+        b, cp, sp = k.b, k.cp, k.sp
+        bdot = [-b[i] * (qd[i] - thd) for i in range(3)]
+        sdot = [-b[i] * qd[i] - (cp[i] * zx + sp[i] * zy) for i in range(3)]
+        columns = []
+        for j in range(3):
+            adot_j = [-thd * (cp[i] * J[0][j] + sp[i] * J[1][j]) + sdot[i] * J[2][j] for i in range(3)]
+            columns.append(self._solve_a(k, [(1.0 if i == j else 0.0) * bdot[i] - adot_j[i] for i in range(3)]))
+        return [[columns[j][row] for j in range(3)] for row in range(3)]
+
+    def _legwise(self, v: np.ndarray, nd: int) -> np.ndarray:
+        """A per-leg constant (3,) shaped (3, 1, ...) for ``nd`` configuration axes."""
+        return v.reshape((3,) + (1,) * nd)
 
     # -- vectorized kinematics: shapes (..., 3) in, (..., 3) or (..., 3, 3) out ---------------------
     @staticmethod
@@ -355,36 +369,36 @@ class Planar3RRP(RobotModel):
         singularity. theta in (-pi, pi]."""
         with np.errstate(invalid="ignore", divide="ignore"):
             _, _, _, _, _, theta, x, y = self._pose(self._legs_first(q))
-        return np.stack([x, y, theta], axis=-1)
+        return np.stack(np.broadcast_arrays(x, y, theta), axis=-1)
 
     def jacobian_many(self, q) -> np.ndarray:
         """J(q), shape (..., 3) -> (..., 3, 3); NaN at a direct singularity."""
-        qT = self._legs_first(q)
         with np.errstate(invalid="ignore", divide="ignore"):
-            sd, cd, V, S, C, _, x, y = self._pose(qT)
-            cp, sp = self._directions(V, S, C, qT.ndim - 1)
-            return self._matrix_last(self._jacobian_from(V, x, y, cp, sp, (cd * C + sd * S) / V))
+            sd, cd, V, S, C, _, x, y = self._pose(self._legs_first(q))
+            cp, sp = self._directions(V, S, C)
+            c = [(cd[i] * C + sd[i] * S) / V for i in range(3)]
+            return self._matrix_last(_array(self._jacobian_from(V, x, y, cp, sp, c)))
 
     def jdot_qdot_many(self, q, qd) -> np.ndarray:
         """Jdot(q, qd) qd, shapes (..., 3) -> (..., 3)."""
         qdT = self._legs_first(qd)
         with np.errstate(invalid="ignore", divide="ignore"):
             k = self._legs(self._legs_first(q))
-            return self._vector_last(self._jdot_qdot(k, self._jacobian(k), qdT))
+            return self._vector_last(_array(self._jdot_qdot(k, self._jacobian(k), qdT)))
 
     def jacobian_dot_many(self, q, qd) -> np.ndarray:
         """Jdot(q, qd) = dJ/dt along qd, shapes (..., 3) -> (..., 3, 3)."""
         qdT = self._legs_first(qd)
         with np.errstate(invalid="ignore", divide="ignore"):
             k = self._legs(self._legs_first(q))
-            return self._matrix_last(self._jacobian_dot(k, self._jacobian(k), qdT))
+            return self._matrix_last(_array(self._jacobian_dot(k, self._jacobian(k), qdT)))
 
     def jacobian_determinant_many(self, q) -> np.ndarray:
         """det J = r^2 prod_i c_i / (sin(alpha_2 - alpha_1) sum_i c_i), shape (..., 3) -> (...):
         0 at an inverse singularity (c_i = 0), NaN at a direct one."""
         with np.errstate(invalid="ignore", divide="ignore"):
             sd, cd, V, S, C, _, _, _ = self._pose(self._legs_first(q))
-            c = (cd * C + sd * S) / V
+            c = _array([(cd[i] * C + sd[i] * S) / V for i in range(3)])
             return self.r ** 2 * c.prod(0) / (self._sin_offsets * V)
 
     def singular_values_many(self, q, theta_scale: float = 1.0, exact: bool = False) -> np.ndarray:
@@ -404,7 +418,7 @@ class Planar3RRP(RobotModel):
         qT = self._legs_first(q)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             k = self._legs(qT)
-            J = self._jacobian(k)
+            J = _array(self._jacobian(k))
             J[2] *= L
             if exact:
                 Jm = self._matrix_last(J)
@@ -414,11 +428,12 @@ class Planar3RRP(RobotModel):
                 return out
             top = np.sqrt(_largest_eigenvalue(_gram(J)))
             # J^-1 = B^-1 A: row i (n_i^T, s_i / L) / (r c_i)
-            rc = self.r * k.c
-            inverse = np.stack([-k.sp / rc, k.cp / rc, k.s / (L * rc)], axis=1)    # (leg i, column, ...)
+            c, cp, sp, s = (_array(v) for v in (k.c, k.cp, k.sp, k.s))
+            rc = self.r * c
+            inverse = np.stack([-sp / rc, cp / rc, s / (L * rc)], axis=1)          # (leg i, column, ...)
             inv_top = np.sqrt(_largest_eigenvalue(_gram(inverse)))
-            low = np.where(np.isfinite(inv_top) & (k.c != 0.0).all(0), 1.0 / inv_top, 0.0) + 0.0 * top
-            det = np.abs(L * self.r ** 2 * k.c.prod(0) / (self._sin_offsets * k.V))
+            low = np.where(np.isfinite(inv_top) & (c != 0.0).all(0), 1.0 / inv_top, 0.0) + 0.0 * top
+            det = np.abs(L * self.r ** 2 * c.prod(0) / (self._sin_offsets * k.V))
             trace = (J * J).sum((0, 1))
             mid = np.where(low > 0.0, det / (top * low), np.sqrt(np.clip(trace - top * top, 0.0, None)))
             return np.stack([top, mid, low], axis=-1)
@@ -443,25 +458,29 @@ class Planar3RRP(RobotModel):
         ``branch``: one sign per leg (:data:`BRANCHES`); angles wrapped into
         [near - pi, near + pi), ``near`` (3,) or (..., 3), by default the home configuration.
         """
-        signs = _branch_signs(branch)
-        x, y, th = self._legs_first(pose)
-        nd = np.ndim(th)
-        phi = th + self._legwise(self.alpha, nd)
-        cp, sp = np.cos(phi), np.sin(phi)
-        ratio = (-x * sp + y * cp) / self.r                               # p_i / r
-        reach = (np.abs(ratio) <= 1.0 + REACH_TOLERANCE).all(0)
-        w = self._legwise(signs, nd) * np.sqrt(np.clip(1.0 - ratio * ratio, 0.0, None))
-        q = phi + np.arctan2(np.clip(ratio, -1.0, 1.0), w)
         ref = self._legs_first(self.configuration("home") if near is None else near)
-        if ref.ndim == 1:
-            ref = self._legwise(ref, nd)
-        q = ref + np.mod(q - ref + math.pi, _TWO_PI) - math.pi
-        return self._vector_last(np.where(reach, q, np.nan))
+        return self._vector_last(_array(self._ik(self._legs_first(pose), _branch_signs(branch), ref)))
+
+    def _ik(self, pose, signs, near) -> list:
+        """The legs' angles (three values, NaN where unreachable) for pose (x, y, theta) on the
+        branch of ``signs`` (three of +1 / -1), wrapped into [near_i - pi, near_i + pi)."""
+        f = _functions(pose[2])
+        x, y, th = pose
+        reach, q = True, []
+        for alpha, sign, ref in zip(self._offsets[0], signs, near):
+            phi = th + alpha
+            cp, sp = f.cos(phi), f.sin(phi)
+            ratio = (-x * sp + y * cp) / self.r                           # p_i / r
+            reach = reach & (abs(ratio) <= 1.0 + REACH_TOLERANCE)
+            w = sign * f.sqrt(f.clip(1.0 - ratio * ratio, 0.0, None))
+            angle = phi + f.atan2(f.clip(ratio, -1.0, 1.0), w)
+            q.append(ref + f.mod(angle - ref + math.pi, _TWO_PI) - math.pi)
+        return [f.where(reach, angle, math.nan) for angle in q]
 
     def slider_extensions_many(self, q) -> np.ndarray:
         """s_i = u_i . (Q_i - Z) (m), shape (..., 3) -> (..., 3)."""
         with np.errstate(invalid="ignore", divide="ignore"):
-            return self._vector_last(self._legs(self._legs_first(q)).s)
+            return self._vector_last(_array(self._legs(self._legs_first(q)).s))
 
     def passive_joints(self, q, qd=None) -> dict[str, np.ndarray]:
         """The passive joints (vectorized, shapes (..., 3)): slider extensions ``s`` (m) and the
@@ -471,22 +490,27 @@ class Planar3RRP(RobotModel):
         qT = self._legs_first(q)
         with np.errstate(invalid="ignore", divide="ignore"):
             k = self._legs(qT)
-            out = {"s": k.s, "psi": -np.arctan2(k.b, self.r * k.c)}
+            b, c, cp, sp = (_array(v) for v in (k.b, k.c, k.cp, k.sp))
+            out = {"s": _array(k.s), "psi": -np.arctan2(b, self.r * c)}
             if qd is not None:
                 qdT = self._legs_first(qd)
                 zx, zy, thd = self._times(self._jacobian(k), qdT)
-                out["sd"] = -k.b * qdT - (k.cp * zx + k.sp * zy)
+                out["sd"] = -b * qdT - (cp * zx + sp * zy)
                 out["psid"] = thd - qdT
         return {name: self._vector_last(value) for name, value in out.items()}
 
     # -- the interface: kinematics ------------------------------------------------------------------
     def _checked(self, q) -> "_Legs":
+        """The legs at one configuration q (3,), in float arithmetic; ValueError if q is not
+        finite or a direct singularity."""
         q = np.asarray(q, dtype=float)
         if q.shape != (3,):
             raise ValueError(f"q: needs 3 joint angles, got shape {q.shape}")
-        with np.errstate(invalid="ignore", divide="ignore"):
-            k = self._legs(q)
-        if not np.isfinite(k.theta):
+        angles = q.tolist()
+        if not math.isfinite(angles[0] + angles[1] + angles[2]) and not all(map(math.isfinite, angles)):
+            raise ValueError(f"q = {angles} rad is not finite")
+        k = self._legs(angles)
+        if not math.isfinite(k.theta):
             raise ValueError(f"q = {q.tolist()} rad is a direct singularity of the {self.kind} mechanism "
                              f"(|sum_i exp(j (q_i - alpha_i))| = {float(self._direct_measure(q)):.3g}): "
                              "the pose is not determined by q")
@@ -495,19 +519,19 @@ class Planar3RRP(RobotModel):
     def fk(self, q: np.ndarray) -> np.ndarray:
         """Pose (x, y, theta), theta in (-pi, pi]; ValueError at a direct singularity."""
         k = self._checked(q)
-        return np.array([float(k.x), float(k.y), float(k.theta)])
+        return np.array([k.x, k.y, k.theta])
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        return self._jacobian(self._checked(q))
+        return np.array(self._jacobian(self._checked(q)))
 
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         k = self._checked(q)
-        return self._jdot_qdot(k, self._jacobian(k), np.asarray(qd, dtype=float))
+        return np.array(self._jdot_qdot(k, self._jacobian(k), _rates(qd)))
 
     def jacobian_dot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """dJ/dt along qd, shape (3, 3)."""
         k = self._checked(q)
-        return self._jacobian_dot(k, self._jacobian(k), np.asarray(qd, dtype=float))
+        return np.array(self._jacobian_dot(k, self._jacobian(k), _rates(qd)))
 
     def jacobian_determinant(self, q: np.ndarray) -> float:
         """det J(q): 0 at an inverse singularity, unbounded near a direct one."""
@@ -526,7 +550,10 @@ class Planar3RRP(RobotModel):
         pose = np.asarray(pose, dtype=float)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             raise ValueError(f"pose: needs 3 finite values (x, y, theta), got {pose.tolist()}")
-        q = self.ik_many(pose, branch, near)
+        ref = self.configuration("home") if near is None else np.asarray(near, dtype=float)
+        if ref.shape != (3,):
+            raise ValueError(f"near: needs 3 joint angles, got shape {ref.shape}")
+        q = np.array(self._ik(pose.tolist(), _branch_signs(branch).tolist(), ref.tolist()))
         if not np.all(np.isfinite(q)):
             p = self.line_distances_many(pose)
             i = int(np.argmax(np.abs(p)))
@@ -540,14 +567,14 @@ class Planar3RRP(RobotModel):
 
     # -- the interface: dynamics --------------------------------------------------------------------
     def _terms(self, q, qd):
+        """J (3, 3) and Jdot qd (3,) at one configuration."""
         k = self._checked(q)
         J = self._jacobian(k)
-        qd = np.asarray(qd, dtype=float)
-        return J, self._jdot_qdot(k, J, qd)
+        return np.array(J), np.array(self._jdot_qdot(k, J, _rates(qd)))
 
     def _mass(self, J: np.ndarray) -> np.ndarray:
-        G = J.T @ (self.end_effector_inertia[:, None] * J)
-        return self.link_inertia_O * np.eye(3) + 0.5 * (G + G.T)          # exactly symmetric
+        G = J.T @ (self._inertia[:, None] * J)
+        return self._links_mass + 0.5 * (G + G.T)          # exactly symmetric
 
     def wrench_torque(self, q: np.ndarray, f_ext) -> np.ndarray:
         """Joint torques (N m) equivalent to the wrench f_ext = (Fx, Fy, Mz) (N, N, N m) on the end
@@ -561,7 +588,7 @@ class Planar3RRP(RobotModel):
     def coriolis_matrix(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """C(q, qd) = J^T M_E Jdot (C qd = N; Mdot - 2C skew)."""
         J = self.jacobian(q)
-        return J.T @ (self.end_effector_inertia[:, None] * self.jacobian_dot(q, qd))
+        return J.T @ (self._inertia[:, None] * self.jacobian_dot(q, qd))
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """Zero: gravity is perpendicular to the plane of motion."""
@@ -570,22 +597,24 @@ class Planar3RRP(RobotModel):
     def nonlinear_effects(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """N(q, qd) = J^T M_E Jdot qd (g = 0)."""
         J, a = self._terms(q, qd)
-        return J.T @ (self.end_effector_inertia * a)
+        return J.T @ (self._inertia * a)
 
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
                          f_ext: np.ndarray | None = None) -> np.ndarray:
         """qdd = M^-1 (tau + J^T f_ext - N); ``f_ext`` = (Fx, Fy, Mz) on the end effector (default 0)."""
         J, a = self._terms(q, qd)
-        rhs = np.asarray(tau, dtype=float) - J.T @ (self.end_effector_inertia * a)
+        rhs = np.asarray(tau, dtype=float) - J.T @ (self._inertia * a)
         if f_ext is not None:
             rhs = rhs + J.T @ np.asarray(f_ext, dtype=float)
-        return np.linalg.solve(self._mass(J), rhs)
+        # LAPACK gesv, as numpy.linalg.solve calls it (the same result) without its overhead;
+        # M is positive definite (I_O > 0), never singular
+        return gesv(self._mass(J), rhs)[2]
 
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                          f_ext: np.ndarray | None = None) -> np.ndarray:
         """tau = M qdd + N - J^T f_ext."""
         J, a = self._terms(q, qd)
-        tau = self._mass(J) @ np.asarray(qdd, dtype=float) + J.T @ (self.end_effector_inertia * a)
+        tau = self._mass(J) @ np.asarray(qdd, dtype=float) + J.T @ (self._inertia * a)
         if f_ext is not None:
             tau = tau - J.T @ np.asarray(f_ext, dtype=float)
         return tau
@@ -594,7 +623,7 @@ class Planar3RRP(RobotModel):
         """1/2 sum_i I_O qd_i^2 + 1/2 xd^T M_E xd (J)."""
         qd = np.asarray(qd, dtype=float)
         xd = self.jacobian(q) @ qd
-        return float(0.5 * self.link_inertia_O * qd @ qd + 0.5 * xd @ (self.end_effector_inertia * xd))
+        return float(0.5 * self.link_inertia_O * qd @ qd + 0.5 * xd @ (self._inertia * xd))
 
     def potential_energy(self, q: np.ndarray) -> float:
         """Zero: gravity does no work in the horizontal plane."""
@@ -622,6 +651,54 @@ class _Legs:
     def __init__(self, theta, V, x, y, cp, sp, c, b, s):
         self.theta, self.V, self.x, self.y = theta, V, x, y
         self.cp, self.sp, self.c, self.b, self.s = cp, sp, c, b, s
+
+
+class _FloatFunctions:
+    """The functions :meth:`Planar3RRP._pose` needs, for one configuration (floats)."""
+
+    sin, cos, atan2, sqrt = math.sin, math.cos, math.atan2, math.sqrt
+    mod = operator.mod                                   # Python's float % is numpy.mod's
+
+    @staticmethod
+    def singular_to_nan(v2: float) -> float:
+        return v2 if v2 > DIRECT_SINGULARITY ** 2 else math.nan
+
+    @staticmethod
+    def clip(v: float, low: float, high: float | None) -> float:
+        v = v if not v < low else low
+        return v if high is None or not v > high else high
+
+    @staticmethod
+    def where(condition: bool, a: float, b: float) -> float:
+        return a if condition else b
+
+
+class _ArrayFunctions:
+    """The same for arrays over many configurations (NumPy)."""
+
+    sin, cos, atan2, sqrt, mod, clip, where = np.sin, np.cos, np.arctan2, np.sqrt, np.mod, np.clip, np.where
+
+    @staticmethod
+    def singular_to_nan(v2: np.ndarray) -> np.ndarray:
+        return np.where(v2 > DIRECT_SINGULARITY ** 2, v2, np.nan)
+
+
+def _functions(value):
+    """:class:`_FloatFunctions` for a float (NumPy's float64 is one), else :class:`_ArrayFunctions`."""
+    return _FloatFunctions if isinstance(value, float) else _ArrayFunctions
+
+
+def _array(values) -> np.ndarray:
+    """Per-leg (or nested row) values as one array, the legs (rows) on axis 0."""
+    return np.array(values, dtype=float) if not isinstance(values, np.ndarray) else values
+
+
+def _rates(qd) -> list:
+    """Joint rates (3,) as floats."""
+    qd = np.asarray(qd, dtype=float)
+    if qd.shape != (3,):
+        raise ValueError(f"qd: needs 3 joint rates, got shape {qd.shape}")
+    return qd.tolist()
 
 
 def _branch_signs(branch: str) -> np.ndarray:

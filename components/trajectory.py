@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -415,6 +416,9 @@ class Circle:
         self.breakpoints = np.unique([0.0, tb, self.duration - tb, self.duration])
         self._phase = _LSPBPiece(np.zeros(1), np.full(1, 2.0 * np.pi), self.duration, self.cruise_factor)
         self._phase_values = (np.zeros(1), np.zeros(1), np.zeros(1))
+        self._break_list = self.breakpoints.tolist()
+        self._center = tuple(self.center.tolist())
+        self._extras = list(zip(self.offset.tolist(), self.amplitude.tolist()))
 
     def phase(self, t: float) -> tuple[float, float, float]:
         """phi (rad), phid (rad/s), phidd (rad/s^2) at ``t``: LSPB from 0 to 2 pi, at rest outside."""
@@ -426,14 +430,28 @@ class Circle:
 
     def evaluate(self, t: float, snap: bool = True):
         """Position, velocity and acceleration (task units) at ``t``, each shape (dim,)."""
+        x, xd, xdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
+        self.evaluate_into(t, x, xd, xdd, snap)
+        return x, xd, xdd
+
+    def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
+                      snap: bool = True) -> None:
+        """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (each shape (dim,)), in float
+        arithmetic (a handful of numbers: NumPy's per-call overhead would cost more)."""
         if snap:
-            t = snap_to(self.breakpoints, t)
+            t = snap_to(self._break_list, t)
         phi, w, alpha = self.phase(t)
         psi = self.start_angle + self.sense * phi
-        c, s = np.cos(psi), np.sin(psi)
+        c, s = math.cos(psi), math.sin(psi)
         r, k = self.radius, self.sense
-        x = np.concatenate([self.center + r * np.array([c, s]), self.offset + self.amplitude * np.sin(phi)])
-        xd = np.concatenate([r * k * w * np.array([-s, c]), self.amplitude * np.cos(phi) * w])
-        xdd = np.concatenate([r * k * alpha * np.array([-s, c]) - r * w * w * np.array([c, s]),
-                              self.amplitude * (np.cos(phi) * alpha - np.sin(phi) * w * w)])
-        return x, xd, xdd
+        rkw, rka, rww = r * k * w, r * k * alpha, r * w * w
+        cx, cy = self._center
+        x[0], x[1] = cx + r * c, cy + r * s
+        xd[0], xd[1] = rkw * -s, rkw * c
+        xdd[0], xdd[1] = rka * -s - rww * c, rka * c - rww * s
+        if self._extras:
+            sin_phi, cos_phi = math.sin(phi), math.cos(phi)
+            for i, (offset, amplitude) in enumerate(self._extras, start=2):
+                x[i] = offset + amplitude * sin_phi
+                xd[i] = amplitude * cos_phi * w
+                xdd[i] = amplitude * (cos_phi * alpha - sin_phi * w * w)

@@ -72,6 +72,8 @@ class IKSolver:
 
     def __init__(self, robot: RobotModel, **values):
         self.robot = robot
+        #: The robot's joint position limits (lower, upper) as lists of floats, read once.
+        self.position_limits = tuple(v.tolist() for v in robot.position_limits())
         try:
             self.values = resolve(self.parameters, values)
         except ParameterError as exc:

@@ -134,10 +134,10 @@ def _check_geometry(solver, fk, configurations) -> None:
 def _check_limits(solver, q, x) -> None:
     """Unreachable if a joint of ``q`` lies outside the URDF's position limits."""
     robot = solver.robot
-    lower, upper = robot.position_limits()
-    units = robot.joint_units(0)
-    for j in range(robot.n):
-        if not (lower[j] - 1e-12 <= q[j] <= upper[j] + 1e-12):
+    lower, upper = solver.position_limits
+    for j, value in enumerate(q.tolist()):
+        if not (lower[j] - 1e-12 <= value <= upper[j] + 1e-12):
+            units = robot.joint_units(0)
             raise Unreachable(f"target {_point(x)} m needs {robot.joint_names[j]} = {q[j]:.6g} {units[j]}, "
                               f"outside its limits {lower[j]:.6g} to {upper[j]:.6g} {units[j]}")
 

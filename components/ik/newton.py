@@ -123,7 +123,7 @@ class NewtonRaphsonIK(IKSolver):
         self.damped = values["step_control"] == "damped"
         self.max_condition = float(values["max_condition"])
         self.lower, self.upper = robot.position_limits()
-        self._limits = list(zip(self.lower.tolist(), self.upper.tolist()))
+        self._limits = list(zip(*self.position_limits))
         if np.any(self.q_guess < self.lower) or np.any(self.q_guess > self.upper):
             raise ValueError(f"IK solver {self.kind!r}: q_guess = {self.q_guess.tolist()} lies outside "
                              "the joint limits")

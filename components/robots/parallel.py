@@ -157,7 +157,6 @@ class Planar3RRP(RobotModel):
         self._cos_alpha, self._sin_alpha = np.cos(self.alpha), np.sin(self.alpha)
         self._offsets = tuple(tuple(v.tolist()) for v in (self.alpha, self._cos_alpha, self._sin_alpha))
         self.link_inertia_O = float(mech.link_inertia_about_origin)
-        self._links_mass = self.link_inertia_O * np.eye(3)            # I_O 1, the links' part of M
         self._ee_mass, self._ee_inertia = float(mech.ee_mass), float(mech.ee_inertia)
         self._lower = np.array(mech.position_lower, dtype=float)
         self._upper = np.array(mech.position_upper, dtype=float)
@@ -185,6 +184,8 @@ class Planar3RRP(RobotModel):
         if not self._direct_measure(np.asarray(home)) > DIRECT_SINGULARITY:
             raise DescriptionError(path, "configurations.home", f"q = {list(home)} is a direct singularity "
                                    "(no pose)")
+        self._home = list(home)
+        self._last = (None, None)          # the last configuration _checked and its legs
         self.payload = 0.0
         self._inertia = self.end_effector_inertia          # diag(M_E), kept with the payload
         self.set_gravity(description.gravity if gravity is None else gravity)
@@ -284,9 +285,12 @@ class Planar3RRP(RobotModel):
         cp, sp = self._directions(V, S, C)               # u = (cp, sp), n = (-sp, cp)
         ct, st = C / V, S / V
         r = self.r
-        c = tuple(cd[i] * ct + sd[i] * st for i in range(3))            # cos(q_i - phi_i)
-        b = tuple(r * (sd[i] * ct - cd[i] * st) for i in range(3))      # r sin(q_i - phi_i)
-        s = tuple(r * c[i] - (cp[i] * x + sp[i] * y) for i in range(3))
+        # written out leg by leg (a comprehension costs more than the arithmetic of one configuration)
+        c = (cd[0] * ct + sd[0] * st, cd[1] * ct + sd[1] * st, cd[2] * ct + sd[2] * st)   # cos(q_i - phi_i)
+        b = (r * (sd[0] * ct - cd[0] * st), r * (sd[1] * ct - cd[1] * st),
+             r * (sd[2] * ct - cd[2] * st))                                           # r sin(q_i - phi_i)
+        s = (r * c[0] - (cp[0] * x + sp[0] * y), r * c[1] - (cp[1] * x + sp[1] * y),
+             r * c[2] - (cp[2] * x + sp[2] * y))
         return _Legs(theta, V, x, y, cp, sp, c, b, s)
 
     def _jacobian_from(self, V, x, y, cp, sp, c) -> list:
@@ -294,13 +298,14 @@ class Planar3RRP(RobotModel):
         gamma_j = c_j / sum_i c_i (sum_i c_i = V), Z rows 2/3 (r c_j n_j - gamma_j sum_i s_i n_i),
         where sum_i s_i n_i = r sum_i c_i n_i - 3/2 (-y, x) (sum_i n_i u_i^T = 3/2 [[0, -1], [1, 0]])."""
         r = self.r
-        gamma = [c[j] / V for j in range(3)]
-        rc = [(2.0 * r / 3.0) * c[j] for j in range(3)]
+        g1, g2, g3 = c[0] / V, c[1] / V, c[2] / V
+        k = 2.0 * r / 3.0
+        rc1, rc2, rc3 = k * c[0], k * c[1], k * c[2]
         snx = (2.0 / 3.0) * (-r * (c[0] * sp[0] + c[1] * sp[1] + c[2] * sp[2]) + 1.5 * y)
         sny = (2.0 / 3.0) * (r * (c[0] * cp[0] + c[1] * cp[1] + c[2] * cp[2]) - 1.5 * x)
-        return [[-rc[j] * sp[j] - gamma[j] * snx for j in range(3)],
-                [rc[j] * cp[j] - gamma[j] * sny for j in range(3)],
-                gamma]
+        return [[-rc1 * sp[0] - g1 * snx, -rc2 * sp[1] - g2 * snx, -rc3 * sp[2] - g3 * snx],
+                [rc1 * cp[0] - g1 * sny, rc2 * cp[1] - g2 * sny, rc3 * cp[2] - g3 * sny],
+                [g1, g2, g3]]
 
     def _jacobian(self, k: "_Legs") -> list:
         return self._jacobian_from(k.V, k.x, k.y, k.cp, k.sp, k.c)
@@ -314,21 +319,23 @@ class Planar3RRP(RobotModel):
         is consistent and v = 2/3 sum_i (h_i - s_i w) n_i (sum_i n_i n_i^T = 3/2 I)."""
         s, cp, sp = k.s, k.cp, k.sp
         w = (h[0] + h[1] + h[2]) / (s[0] + s[1] + s[2])
-        hp = [h[i] - s[i] * w for i in range(3)]
-        return [-(2.0 / 3.0) * (hp[0] * sp[0] + hp[1] * sp[1] + hp[2] * sp[2]),
-                (2.0 / 3.0) * (hp[0] * cp[0] + hp[1] * cp[1] + hp[2] * cp[2]), w]
+        hp1, hp2, hp3 = h[0] - s[0] * w, h[1] - s[1] * w, h[2] - s[2] * w
+        return [-(2.0 / 3.0) * (hp1 * sp[0] + hp2 * sp[1] + hp3 * sp[2]),
+                (2.0 / 3.0) * (hp1 * cp[0] + hp2 * cp[1] + hp3 * cp[2]), w]
 
     @staticmethod
     def _times(J, v) -> list:
         """J v for J as rows of three values and v three values."""
-        return [row[0] * v[0] + row[1] * v[1] + row[2] * v[2] for row in J]
+        (a, b, c), (d, e, f), (g, h, i) = J
+        return [a * v[0] + b * v[1] + c * v[2], d * v[0] + e * v[1] + f * v[2], g * v[0] + h * v[1] + i * v[2]]
 
     def _jdot_qdot(self, k: "_Legs", J, qd) -> list:
         """Jdot qd = A^-1 h, h_i = -b_i qd_i^2 + 2 b_i thetad qd_i + 2 thetad u_i . Zd."""
         zx, zy, thd = self._times(J, qd)
         b, cp, sp = k.b, k.cp, k.sp
-        h = [-b[i] * qd[i] * qd[i] + 2.0 * b[i] * thd * qd[i] + 2.0 * thd * (cp[i] * zx + sp[i] * zy)
-             for i in range(3)]
+        h = (-b[0] * qd[0] * qd[0] + 2.0 * b[0] * thd * qd[0] + 2.0 * thd * (cp[0] * zx + sp[0] * zy),
+             -b[1] * qd[1] * qd[1] + 2.0 * b[1] * thd * qd[1] + 2.0 * thd * (cp[1] * zx + sp[1] * zy),
+             -b[2] * qd[2] * qd[2] + 2.0 * b[2] * thd * qd[2] + 2.0 * thd * (cp[2] * zx + sp[2] * zy))
         return self._solve_a(k, h)
 
     def _jacobian_dot(self, k: "_Legs", J, qd) -> list:
@@ -507,6 +514,8 @@ class Planar3RRP(RobotModel):
         if q.shape != (3,):
             raise ValueError(f"q: needs 3 joint angles, got shape {q.shape}")
         angles = q.tolist()
+        if angles == self._last[0]:          # the same configuration again (IK: J, then Jdot qd)
+            return self._last[1]
         if not math.isfinite(angles[0] + angles[1] + angles[2]) and not all(map(math.isfinite, angles)):
             raise ValueError(f"q = {angles} rad is not finite")
         k = self._legs(angles)
@@ -514,6 +523,7 @@ class Planar3RRP(RobotModel):
             raise ValueError(f"q = {q.tolist()} rad is a direct singularity of the {self.kind} mechanism "
                              f"(|sum_i exp(j (q_i - alpha_i))| = {float(self._direct_measure(q)):.3g}): "
                              "the pose is not determined by q")
+        self._last = (angles, k)
         return k
 
     def fk(self, q: np.ndarray) -> np.ndarray:
@@ -548,13 +558,17 @@ class Planar3RRP(RobotModel):
         """Joint angles placing the end effector at ``pose`` on ``branch`` (see :meth:`ik_many`);
         ValueError naming the leg whose line misses the circle."""
         pose = np.asarray(pose, dtype=float)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise ValueError(f"pose: needs 3 finite values (x, y, theta), got {pose.tolist()}")
-        ref = self.configuration("home") if near is None else np.asarray(near, dtype=float)
-        if ref.shape != (3,):
-            raise ValueError(f"near: needs 3 joint angles, got shape {ref.shape}")
-        q = np.array(self._ik(pose.tolist(), _branch_signs(branch).tolist(), ref.tolist()))
-        if not np.all(np.isfinite(q)):
+        values = pose.tolist()
+        if pose.shape != (3,) or not all(map(math.isfinite, values)):
+            raise ValueError(f"pose: needs 3 finite values (x, y, theta), got {values}")
+        if near is None:
+            ref = self._home
+        else:
+            ref = np.asarray(near, dtype=float).tolist()
+            if len(ref) != 3 or np.ndim(near) != 1:
+                raise ValueError(f"near: needs 3 joint angles, got shape {np.shape(near)}")
+        q = np.array(self._ik(values, _branch_signs(branch), ref))
+        if not math.isfinite(q.dot(q)):
             p = self.line_distances_many(pose)
             i = int(np.argmax(np.abs(p)))
             x, y, th = pose.tolist()
@@ -566,24 +580,37 @@ class Planar3RRP(RobotModel):
         return q
 
     # -- the interface: dynamics --------------------------------------------------------------------
+    # At one configuration in float arithmetic as the kinematics above: J's columns j are the
+    # joints, its rows i the task coordinates, M_E = diag(w_1, w_2, w_3).
     def _terms(self, q, qd):
-        """J (3, 3) and Jdot qd (3,) at one configuration."""
+        """J (rows of three floats) and N = J^T M_E Jdot qd (three floats) at one configuration."""
         k = self._checked(q)
         J = self._jacobian(k)
-        return np.array(J), np.array(self._jdot_qdot(k, J, _rates(qd)))
+        a1, a2, a3 = self._jdot_qdot(k, J, _rates(qd))
+        w1, w2, w3 = self._inertia.tolist()
+        return J, _transposed_times(J, (w1 * a1, w2 * a2, w3 * a3))
 
-    def _mass(self, J: np.ndarray) -> np.ndarray:
-        G = J.T @ (self._inertia[:, None] * J)
-        return self._links_mass + 0.5 * (G + G.T)          # exactly symmetric
+    def _mass(self, J) -> np.ndarray:
+        """M = I_O 1 + J^T M_E J (3, 3), exactly symmetric, from J as rows of three floats:
+        M_jk = I_O delta_jk + sum_i w_i J_ij J_ik."""
+        w1, w2, w3 = self._inertia.tolist()
+        i_o = self.link_inertia_O
+        (a, b, c), (d, e, f), (g, h, i) = J
+        m12 = w1 * a * b + w2 * d * e + w3 * g * h
+        m13 = w1 * a * c + w2 * d * f + w3 * g * i
+        m23 = w1 * b * c + w2 * e * f + w3 * h * i
+        return np.array([[i_o + (w1 * a * a + w2 * d * d + w3 * g * g), m12, m13],
+                         [m12, i_o + (w1 * b * b + w2 * e * e + w3 * h * h), m23],
+                         [m13, m23, i_o + (w1 * c * c + w2 * f * f + w3 * i * i)]])
 
     def wrench_torque(self, q: np.ndarray, f_ext) -> np.ndarray:
         """Joint torques (N m) equivalent to the wrench f_ext = (Fx, Fy, Mz) (N, N, N m) on the end
         effector at Z, world axes: J(q)^T f_ext."""
-        return self.jacobian(q).T @ np.asarray(f_ext, dtype=float)
+        return np.array(_transposed_times(self._jacobian(self._checked(q)), _wrench(f_ext)))
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """M(q) = I_O 1 + J^T M_E J."""
-        return self._mass(self.jacobian(q))
+        return self._mass(self._jacobian(self._checked(q)))
 
     def coriolis_matrix(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """C(q, qd) = J^T M_E Jdot (C qd = N; Mdot - 2C skew)."""
@@ -596,16 +623,15 @@ class Planar3RRP(RobotModel):
 
     def nonlinear_effects(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """N(q, qd) = J^T M_E Jdot qd (g = 0)."""
-        J, a = self._terms(q, qd)
-        return J.T @ (self._inertia * a)
+        return np.array(self._terms(q, qd)[1])
 
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
                          f_ext: np.ndarray | None = None) -> np.ndarray:
         """qdd = M^-1 (tau + J^T f_ext - N); ``f_ext`` = (Fx, Fy, Mz) on the end effector (default 0)."""
-        J, a = self._terms(q, qd)
-        rhs = np.asarray(tau, dtype=float) - J.T @ (self._inertia * a)
+        J, n = self._terms(q, qd)
+        rhs = np.asarray(tau, dtype=float) - n
         if f_ext is not None:
-            rhs = rhs + J.T @ np.asarray(f_ext, dtype=float)
+            rhs += _transposed_times(J, _wrench(f_ext))
         # LAPACK gesv, as numpy.linalg.solve calls it (the same result) without its overhead;
         # M is positive definite (I_O > 0), never singular
         return gesv(self._mass(J), rhs)[2]
@@ -613,10 +639,10 @@ class Planar3RRP(RobotModel):
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                          f_ext: np.ndarray | None = None) -> np.ndarray:
         """tau = M qdd + N - J^T f_ext."""
-        J, a = self._terms(q, qd)
-        tau = self._mass(J) @ np.asarray(qdd, dtype=float) + J.T @ (self._inertia * a)
+        J, n = self._terms(q, qd)
+        tau = self._mass(J) @ np.asarray(qdd, dtype=float) + n
         if f_ext is not None:
-            tau = tau - J.T @ np.asarray(f_ext, dtype=float)
+            tau -= _transposed_times(J, _wrench(f_ext))
         return tau
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
@@ -693,6 +719,20 @@ def _array(values) -> np.ndarray:
     return np.array(values, dtype=float) if not isinstance(values, np.ndarray) else values
 
 
+def _transposed_times(J, v) -> tuple:
+    """J^T v for J as rows of three values and v three values."""
+    (a, b, c), (d, e, f), (g, h, i) = J
+    return (a * v[0] + d * v[1] + g * v[2], b * v[0] + e * v[1] + h * v[2], c * v[0] + f * v[1] + i * v[2])
+
+
+def _wrench(f_ext) -> list:
+    """An end-effector wrench (Fx, Fy, Mz) as three floats."""
+    f = np.asarray(f_ext, dtype=float)
+    if f.shape != (3,):
+        raise ValueError(f"f_ext: needs 3 values (Fx, Fy, Mz), got shape {f.shape}")
+    return f.tolist()
+
+
 def _rates(qd) -> list:
     """Joint rates (3,) as floats."""
     qd = np.asarray(qd, dtype=float)
@@ -701,10 +741,15 @@ def _rates(qd) -> list:
     return qd.tolist()
 
 
-def _branch_signs(branch: str) -> np.ndarray:
-    if branch not in BRANCHES:
-        raise ValueError(f"branch {branch!r} is invalid: must be one of {', '.join(BRANCHES)}")
-    return np.array([1.0 if ch == "+" else -1.0 for ch in branch])
+_BRANCH_SIGNS = {branch: tuple(1.0 if ch == "+" else -1.0 for ch in branch) for branch in BRANCHES}
+
+
+def _branch_signs(branch: str) -> tuple:
+    """The branch's signs (three of +1.0 / -1.0); ValueError if it is not one of :data:`BRANCHES`."""
+    try:
+        return _BRANCH_SIGNS[branch]
+    except (KeyError, TypeError):
+        raise ValueError(f"branch {branch!r} is invalid: must be one of {', '.join(BRANCHES)}") from None
 
 
 def _gram(K: np.ndarray) -> np.ndarray:

@@ -23,7 +23,11 @@ class Tracking:
         max |q_ref - q| and RMS of q_ref - q (joint units: rad or m).
     joint_units, effort_units : list of str
     tcp_error : ndarray, shape (k,) or None
-        |FK(q) - x_ref| at every recorded point (task units), where the run has a task reference.
+        The task point's distance |FK(q) - x_ref| (m, over the task coordinates in m) at every
+        recorded point, where the run has a task reference.
+    orientation_error : ndarray, shape (k,) or None
+        The largest |FK(q)_i - x_ref_i| (rad) over the task coordinates in rad (a pose's angle),
+        where the task has such coordinates.
     events : dict
         name -> (time in s, task-point error or NaN), e.g. when the gripper closes.
     peak_effort : ndarray, shape (n,) or None
@@ -39,6 +43,7 @@ class Tracking:
     joint_units: list
     effort_units: list
     tcp_error: np.ndarray | None
+    orientation_error: np.ndarray | None
     events: dict
     peak_effort: np.ndarray | None
     final_error: np.ndarray
@@ -56,14 +61,14 @@ def tracking(result: Result, roles: Roles) -> Tracking:
     joint_units = [result.units.get(f"{roles.q}[{j + 1}]") or u for j, u in enumerate(model.joint_units(0))]
     effort_units = [(result.units.get(f"{roles.tau}[{j + 1}]") if roles.tau else None) or u
                     for j, u in enumerate(model.effort_units())]
-    tcp = roles.tcp_error(result, model)
+    tcp, orientation = roles.task_errors(result, model) or (None, None)
     ev = {}
     for name, t in roles.events(result).items():
         k = int(np.argmin(np.abs(result.time - t)))
         ev[name] = (float(result.time[k]), float(tcp[k]) if tcp is not None else float("nan"))
     speed = np.abs(result.vector(roles.qd)[-1]) if roles.qd and f"{roles.qd}[1]" in result.columns else None
     return Tracking(np.max(np.abs(e), axis=0), np.sqrt(np.mean(e ** 2, axis=0)), joint_units[:n],
-                    effort_units[:n], tcp, ev, None if tau is None else np.max(np.abs(tau), axis=0), e[-1], speed)
+                    effort_units[:n], tcp, orientation, ev, None if tau is None else np.max(np.abs(tau), axis=0), e[-1], speed)
 
 
 def markdown_table(rows: list[list], header: list[str]) -> str:
@@ -93,6 +98,8 @@ def tracking_report(name: str, description: str, m: Tracking, result: Result) ->
         line = f"Task-point error |FK(q) - x_ref|: max {np.max(m.tcp_error) * 1e3:.4f} mm over the run"
         if m.events:
             line += "; " + "; ".join(f"{k} at t = {t:g} s: {e * 1e3:.4f} mm" for k, (t, e) in m.events.items())
+        if m.orientation_error is not None:
+            line += f"; orientation error max {np.max(m.orientation_error) * 1e3:.4f} mrad"
         text += ["", line + "."]
     if m.final_speed is not None:
         text += ["", "At the end (t = {:g} s): joint speeds {}.".format(

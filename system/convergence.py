@@ -6,7 +6,8 @@ points t_k, with the continuous closed loop of :mod:`robofmu.system.reference` (
 sampled on every grid):
 
 - ``q_error``: max over k and joints of |q_cosim(t_k) - q_mono(t_k)| (joint units: rad or m);
-- ``tcp_error``: max over k of ||fk(q_cosim(t_k)) - fk(q_mono(t_k))|| (m);
+- ``tcp_error``: max over k of ||fk(q_cosim(t_k)) - fk(q_mono(t_k))|| (m), over the task
+  coordinates measured in m (a pose's angle is not added to a distance);
 - ``tracking``: max over k of ||fk(q_cosim(t_k)) - x_ref(t_k)|| (m), the co-simulated TCP's
   distance to the task-space trajectory (for context: includes the loop's own tracking error,
   which is zero when the controller's model is exact).
@@ -58,7 +59,7 @@ from .diagram import System
 from .experiment import load
 from .master import ALGORITHMS, Master, Result
 from .replica import InProcessDiagram
-from .roles import Roles
+from .roles import Roles, task_axes
 
 __all__ = ["DEFAULT_STEPS", "ALGORITHMS", "errors", "observed_order", "run_cosim",
            "study", "markdown_table", "plot"]
@@ -128,7 +129,7 @@ def errors(result: Result, reference: Result, roles: Roles, model=None) -> dict[
     Returns
     -------
     dict
-        ``q_error`` (joint units), ``qd_error``, ``tcp_error`` (task units), ``tracking``
+        ``q_error`` (joint units), ``qd_error``, ``tcp_error`` (m), ``tracking``
         (distance of the co-simulated task point to ``x_ref``; NaN without that role),
         ``q_error_at`` (s, where q_error occurs).
     """
@@ -136,8 +137,9 @@ def errors(result: Result, reference: Result, roles: Roles, model=None) -> dict[
     q, q_mono = result.vector(roles.q), reference.vector(roles.q)
     dq = np.abs(q - q_mono)
     k = int(np.argmax(dq.max(axis=1)))
-    tcp = np.array([model.fk(v) for v in q])
-    tcp_mono = np.array([model.fk(v) for v in q_mono])
+    position = task_axes(model)[0]
+    tcp = np.array([model.fk(v) for v in q])[:, position]
+    tcp_mono = np.array([model.fk(v) for v in q_mono])[:, position]
     out = {"q_error": float(dq.max()), "q_error_at": float(result.time[k]),
            "tcp_error": float(np.linalg.norm(tcp - tcp_mono, axis=1).max()),
            "tracking": math.nan, "qd_error": math.nan}

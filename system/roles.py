@@ -65,13 +65,23 @@ class Roles:
         return result.vector(getattr(self, role))
 
     def tcp_error(self, result: Result, model: RobotModel | None = None) -> np.ndarray | None:
-        """|FK(q) - x_ref| at every recorded point (task units), or None without an x_ref role."""
+        """The task point's distance |FK(q) - x_ref| (m) at every recorded point, over the task
+        coordinates measured in m (:func:`task_axes`; a pose's angle is apart, see
+        :meth:`orientation_error`), or None without an x_ref role."""
+        errors = self.task_errors(result, model)
+        return None if errors is None else errors[0]
+
+    def task_errors(self, result: Result, model: RobotModel | None = None):
+        """(position, orientation) errors at every recorded point, FK(q) against x_ref: the
+        task point's distance (m, :meth:`tcp_error`) and max_i |FK(q)_i - x_ref_i| (rad) over
+        the coordinates measured in rad (None where the task has none); None without an x_ref role."""
         if self.x_ref is None or self.q is None:
             return None
         model = model or self.model()
-        q = result.vector(self.q)
-        tcp = np.array([model.fk(v) for v in q])
-        return np.linalg.norm(tcp - result.vector(self.x_ref), axis=1)
+        difference = np.array([model.fk(v) for v in result.vector(self.q)]) - result.vector(self.x_ref)
+        position, angle = task_axes(model)
+        return (np.linalg.norm(difference[:, position], axis=1),
+                np.abs(difference[:, angle]).max(axis=1) if angle else None)
 
     def events(self, result: Result) -> dict[str, float]:
         """Instants where the gripper closes and opens (s), from the recorded ``grip`` role."""
@@ -83,3 +93,10 @@ class Roles:
         for k in change:
             events["grip closes" if closed[k + 1] else "grip opens"] = float(result.time[k + 1])
         return events
+
+
+def task_axes(model: RobotModel) -> tuple[list[int], list[int]]:
+    """Indices of the model's task coordinates measured in m (the task point) and in rad (an
+    orientation), from its task units."""
+    units = model.task_units(0)
+    return ([i for i, u in enumerate(units) if u == "m"], [i for i, u in enumerate(units) if u == "rad"])

@@ -31,6 +31,9 @@ def test_rrp_line_keeps_the_tcp_within_0_1_mm_of_the_path(fmu_root):
     x_ref = np.array([line.evaluate(t)[0] for t in result.time])
     np.testing.assert_allclose(result.vector("trajectory.x_ref"), x_ref, rtol=0, atol=1e-15)
     assert np.linalg.norm(tcp - x_ref, axis=1).max() < 1e-4
+    metrics = tracking(result, Roles.of(system))              # every task coordinate is a length
+    np.testing.assert_allclose(metrics.tcp_error, np.linalg.norm(tcp - x_ref, axis=1), rtol=0, atol=1e-15)
+    assert metrics.orientation_error is None
     np.testing.assert_allclose(result.vector("fk.x"), tcp, rtol=0, atol=1e-15)
     np.testing.assert_allclose(tcp[-1], line.end, atol=1e-6)       # at rest at the end of the line
     assert np.abs(result.vector("plant.qd")[-1]).max() < 1e-6
@@ -164,6 +167,11 @@ def test_3rrp_circle_tracks_the_pose_within_0_1_mm_and_0_1_mrad_and_ends_at_rest
     position_error = np.linalg.norm(pose[:, :2] - x_ref[:, :2], axis=1)
     angle_error = np.abs(pose[:, 2] - x_ref[:, 2])
     assert position_error.max() < 1e-4 and angle_error.max() < 1e-4
+    # the report's task-point error is the distance in (x, y) (m), the angle apart (rad): not one
+    # norm over metres and radians
+    metrics = tracking(result, Roles.of(system))
+    np.testing.assert_allclose(metrics.tcp_error, position_error, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(metrics.orientation_error, angle_error, rtol=0, atol=1e-15)
     check_pose_outputs(model, result)
     # at rest at home at the end
     np.testing.assert_allclose(pose[-1], HOME_POSE, atol=1e-9)

@@ -6,8 +6,8 @@ of a single run with the same parameters bit for bit.
 
 Columns (joint j = 1 .. n; joint units rad or m, effort units N·m or N):
 
-- ``max_tcp_error`` (m): max |FK(q) - x_ref| over the run, where the experiment has a task
-  reference;
+- ``max_tcp_error`` (m): max |FK(q) - x_ref| over the run, over the task coordinates measured in
+  m (a pose's angle is not added to a distance), where the experiment has a task reference;
 - ``max_joint_error``: the largest ``max_joint_error[j]``;
 - ``peak_effort``: the largest ``peak_effort[j]``, where the experiment has efforts;
 - ``settling_time`` (s): see :func:`~robofmu.system.analysis.settling_time` (empty where it

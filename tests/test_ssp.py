@@ -58,12 +58,13 @@ from robofmu.system.ssp import NS, export_ssp, run_ssp_fmpy, run_ssp_libcosim, s
 STOP = 2.0                  # s: chess: first move (0-1 s), pause, start of the second move
 STEPS = (1e-3, 5e-4)        # s
 BLOCKS = ["trajectory", "ik", "controller", "plant"]
-EXPERIMENTS = ["chess-pd", "rrp-line", "rpp-bangbang"]
+EXPERIMENTS = ["chess-pd", "rrp-line", "rpp-bangbang", "3rrp-circle"]
 #: Scalar connections of each experiment's loop (each wire expanded to its vector's length)
 CONNECTIONS = {
     "chess-pd": 35,             # 3 x 3 + 3 x 4 + 2 x 4 + 4 + 2 (the grip twice)
     "rrp-line": 30,             # 3 x 3 + 3 x 3 + 2 x 3 + 3 + 3 (plant.q -> fk.q)
     "rpp-bangbang": 21,         # 3 x 3 + 2 x 3 + 3 + 3
+    "3rrp-circle": 33,          # 3 x 3 + 3 x 3 + 2 x 3 + 3 + 3 + 3 (plant.q -> fk.q, jacobian.q)
 }
 
 
@@ -152,7 +153,7 @@ def joint_diff(a, b, name="plant.q"):
 
 
 # -- the package ------------------------------------------------------------------------------------------
-STOP_TIMES = {"chess-pd": 13.0, "rrp-line": 3.0, "rpp-bangbang": 2.0}       # s, the experiments' own
+STOP_TIMES = {"chess-pd": 13.0, "rrp-line": 3.0, "rpp-bangbang": 2.0, "3rrp-circle": 5.0}       # s, the experiments' own
 
 
 @pytest.mark.parametrize("name", EXPERIMENTS)
@@ -163,7 +164,9 @@ def test_ssd_is_well_formed_with_components_connectors_and_connections(systems, 
     description = load_description(system.extra["robot"])
     with zipfile.ZipFile(ssp) as zf:
         names = set(zf.namelist())
-    assert {"SystemStructure.ssd", "resources/controller.ssv"} | {f"resources/{b}.fmu" for b in blocks} == names
+    bound = {f"resources/{b.name}.ssv" for b in system.blocks if b.parameters}     # values the experiment sets
+    assert "resources/controller.ssv" in bound
+    assert {"SystemStructure.ssd"} | bound | {f"resources/{b}.fmu" for b in blocks} == names
 
     root = ET.fromstring(ssd_text(ssp))                                   # well-formed XML
     assert root.tag == f"{{{NS['ssd']}}}SystemStructureDescription"
@@ -174,9 +177,13 @@ def test_ssd_is_well_formed_with_components_connectors_and_connections(systems, 
 
     master = Master(system)
     assert master.check() == []                                           # every input wired
+    wired = {(link.target, link.input) for link in master.links}
     for comp in components:
         md = master.nodes[comp.get("name")].md
-        expected = {v.name: v for v in md.modelVariables if v.causality in ("input", "output")}  # all wired
+        # every output; every wired input (an input the experiment sets instead, as 3rrp-circle's
+        # plant.f_ext = 0, is a value of the block's parameter set, not a connector)
+        expected = {v.name: v for v in md.modelVariables if v.causality == "output"
+                    or (v.causality == "input" and (comp.get("name"), v.name) in wired)}
         connectors = comp.findall("ssd:Connectors/ssd:Connector", NS)
         assert {c.get("name"): c.get("kind") for c in connectors} == \
                {n: v.causality for n, v in expected.items()}
@@ -188,7 +195,7 @@ def test_ssd_is_well_formed_with_components_connectors_and_connections(systems, 
         assert plant.find("ssd:Connectors/ssd:Connector[@name='grip']/ssc:Boolean", NS) is not None
     unit = plant.find("ssd:Connectors/ssd:Connector[@name='q[2]']/ssc:Real", NS).get("unit")
     assert unit == load_model(description).joint_units()[1] == {"chess-pd": "rad", "rrp-line": "rad",
-                                                                "rpp-bangbang": "m"}[name]
+                                                                "rpp-bangbang": "m", "3rrp-circle": "rad"}[name]
 
     # every wire expanded to scalar variables (chess: 3 x 3 + 3 x 4 + 2 x 4 + 4 + 2 = 35)
     connections = [(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))

@@ -189,6 +189,13 @@ class Block:
         self._slots[base] = slice(first, first + rows * cols)
         return self._slots[base]
 
+    def joint_positions(self, base: str, description: str) -> slice:
+        """Declare a joint-position input vector ``base[j]`` (joint units), starting at the robot's
+        ``home`` configuration (q = 0 may be a singularity); ``description``: with ``{i}``."""
+        robot = self.robot
+        return self.reals(base, robot.n, "input", robot.joint_units(0), description,
+                          starts=robot.configuration("home"))
+
     def boolean(self, name: str, causality: str, description: str, start: bool = False,
                 depends=None, initial_depends=None) -> int:
         return self._add(Variable(name, name, "Boolean", causality, None, description, bool(start),

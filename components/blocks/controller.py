@@ -10,8 +10,6 @@ controller does not know the payload).
 """
 from __future__ import annotations
 
-import numpy as np
-
 from ..control import ComputedTorque
 from .base import Block, vector_names
 
@@ -34,12 +32,11 @@ class ControllerBlock(Block):
         if self.has_payload:
             self.real("payload_mass", "parameter", "kg", "Payload the model assumes while grip is true "
                       "(0: unknown to it)", 0.0, low=0.0)
-        u0, u1, u2 = (robot.joint_units(k) for k in range(3))
-        home = robot.configuration("home")     # positions start at home (q = 0 may be singular)
-        self.q_ref = self.reals("q_ref", n, "input", u0, "Joint {i} reference position", starts=home)
+        u1, u2 = robot.joint_units(1), robot.joint_units(2)
+        self.q_ref = self.joint_positions("q_ref", "Joint {i} reference position")
         self.qd_ref = self.reals("qd_ref", n, "input", u1, "Joint {i} reference velocity")
         self.qdd_ref = self.reals("qdd_ref", n, "input", u2, "Joint {i} reference acceleration")
-        self.q = self.reals("q", n, "input", u0, "Joint {i} measured position", starts=home)
+        self.q = self.joint_positions("q", "Joint {i} measured position")
         self.qd = self.reals("qd", n, "input", u1, "Joint {i} measured velocity")
         inputs = [name for b in ("q_ref", "qd_ref", "qdd_ref", "q", "qd") for name in vector_names(b, n)]
         if self.has_payload:

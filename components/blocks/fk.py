@@ -12,8 +12,7 @@ class FKBlock(Block):
     def declare(self):
         robot = self.robot
         coords = robot.task_coordinates
-        self.q = self.reals("q", robot.n, "input", robot.joint_units(0), "Joint {i} position",
-                            starts=robot.configuration("home"))
+        self.q = self.joint_positions("q", "Joint {i} position")
         self.x = self.reals("x", robot.m, "output", robot.task_units(0),
                             lambda i: f"Task coordinate {coords[i - 1]}", depends=vector_names("q", robot.n))
 

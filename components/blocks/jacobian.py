@@ -21,7 +21,7 @@ class JacobianBlock(Block):
         n, m = robot.n, robot.m
         coords, joints = robot.task_coordinates, robot.joint_units(0)
         tasks = robot.task_units(0)
-        self.q = self.reals("q", n, "input", joints, "Joint {i} position", starts=robot.configuration("home"))
+        self.q = self.joint_positions("q", "Joint {i} position")
         self.J = self.real_matrix(
             "J", m, n, "output", lambda i, j: quotient_unit(tasks[i - 1], joints[j - 1]),
             lambda i, j: f"Jacobian entry d {coords[i - 1]} / d q{j} (task coordinate {i} over joint {j})",

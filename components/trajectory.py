@@ -286,6 +286,7 @@ class StraightLine:
         self.v_peak = self.a_max * self.t1
         self.end = self.start + self.length * self.direction
         self.breakpoints = np.unique([0.0, self.t1, self.duration - self.t1, self.duration])
+        self._break_list = self.breakpoints.tolist()
 
     def path(self, t: float) -> tuple[float, float, float]:
         """Arc length (m), speed (m/s) and acceleration (m/s^2) along the line at ``t``."""
@@ -303,11 +304,21 @@ class StraightLine:
 
     def evaluate(self, t: float, snap: bool = True):
         """Position (m), velocity (m/s), acceleration (m/s^2) at ``t``, each shape (m,)."""
+        x, xd, xdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
+        self.evaluate_into(t, x, xd, xdd, snap)
+        return x, xd, xdd
+
+    def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
+                      snap: bool = True) -> None:
+        """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (each shape (m,); no allocation)."""
         if snap:
-            t = snap_to(self.breakpoints, t)
+            t = snap_to(self._break_list, t)
         s, v, a = self.path(t)
         d = self.direction
-        return self.start + s * d, v * d, a * d
+        np.multiply(d, s, out=x)
+        np.add(self.start, x, out=x)                 # start + s d
+        np.multiply(d, v, out=xd)
+        np.multiply(d, a, out=xdd)
 
 
 class SynchronizedBangBang:
@@ -345,21 +356,39 @@ class SynchronizedBangBang:
         self.switch_time = 0.5 * self.duration
         self.peak_velocity = self.acceleration * self.switch_time
         self.breakpoints = np.unique([0.0, self.switch_time, self.duration])
+        self._break_list = self.breakpoints.tolist()
+        self._half_acceleration = 0.5 * self.acceleration
 
     def evaluate(self, t: float, snap: bool = True):
         """Position, velocity and acceleration (joint units) at ``t``, each shape (n,)."""
+        q, qd, qdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
+        self.evaluate_into(t, q, qd, qdd, snap)
+        return q, qd, qdd
+
+    def evaluate_into(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                      snap: bool = True) -> None:
+        """:meth:`evaluate` written into ``q``, ``qd``, ``qdd`` (each shape (n,); no allocation)."""
         if snap:
-            t = snap_to(self.breakpoints, t)
-        zero = np.zeros(self.dim)
-        if t < 0.0 or self.duration == 0.0:
-            return self.q_start.copy(), zero, zero.copy()
-        if t >= self.duration:
-            return self.q_end.copy(), zero, zero.copy()
+            t = snap_to(self._break_list, t)
+        if t < 0.0 or self.duration == 0.0 or t >= self.duration:       # at rest
+            q[:] = self.q_start if t < 0.0 or self.duration == 0.0 else self.q_end
+            qd[:] = 0.0
+            qdd[:] = 0.0
+            return
         a = self.acceleration
         if t < self.switch_time:
-            return self.q_start + 0.5 * a * t * t, a * t, a.copy()
+            np.multiply(self._half_acceleration, t, out=q)
+            np.multiply(q, t, out=q)
+            np.add(self.q_start, q, out=q)           # q_start + a t^2 / 2
+            np.multiply(a, t, out=qd)
+            qdd[:] = a
+            return
         r = self.duration - t
-        return self.q_end - 0.5 * a * r * r, a * r, -a
+        np.multiply(self._half_acceleration, r, out=q)
+        np.multiply(q, r, out=q)
+        np.subtract(self.q_end, q, out=q)            # q_end - a r^2 / 2
+        np.multiply(a, r, out=qd)
+        np.negative(a, out=qdd)
 
 
 class Circle:

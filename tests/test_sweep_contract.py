@@ -31,9 +31,12 @@ def test_a_sweep_run_of_every_robot(robot, fmu_root):
     system, roles, metrics, units, runs = check(design, fmu_root)
     record = run_one(system, runs[1], design.stop_time, None)
     assert record["status"] == "ok", record["message"]
-    assert [k for k in record if k in metrics] == metrics == metric_names(roles, roles.model().n)
+    model = roles.model()
+    assert [k for k in record if k in metrics] == metrics == metric_names(roles, model)
     assert all(math.isfinite(record[m]) for m in metrics if m != "settling_time")
     assert ("max_tcp_error" in metrics) == bool(roles.x_ref) and ("peak_effort" in metrics) == bool(roles.tau)
+    angles = "rad" in model.task_units(0)           # a pose's angle: its error apart from the distance
+    assert ("max_orientation_error" in metrics) == (bool(roles.x_ref) and angles)
     configured = experiment.with_parameters(system, {"controller.gain_scale": 2.0})
     master = Master(configured)
     master.check()

@@ -8,6 +8,8 @@ Columns (joint j = 1 .. n; joint units rad or m, effort units N·m or N):
 
 - ``max_tcp_error`` (m): max |FK(q) - x_ref| over the run, over the task coordinates measured in
   m (a pose's angle is not added to a distance), where the experiment has a task reference;
+- ``max_orientation_error`` (rad): max |FK(q)_i - x_ref_i| over the task coordinates measured in
+  rad, where the experiment has a task reference and the robot's task such coordinates (3rrp);
 - ``max_joint_error``: the largest ``max_joint_error[j]``;
 - ``peak_effort``: the largest ``peak_effort[j]``, where the experiment has efforts;
 - ``settling_time`` (s): see :func:`~robofmu.system.analysis.settling_time` (empty where it
@@ -17,21 +19,24 @@ Columns (joint j = 1 .. n; joint units rad or m, effort units N·m or N):
 """
 from __future__ import annotations
 
+from robofmu.components.robots import RobotModel
+
 from ..analysis import Tracking, settling_time
 from ..result import Result
-from ..roles import Roles
+from ..roles import Roles, task_axes
 
 __all__ = ["METRIC_UNITS", "metric_names", "metrics_of"]
 
 #: The metrics whose unit is the same for every robot (the joint ones are rad or m per joint).
-METRIC_UNITS = {"max_tcp_error": "m", "settling_time": "s"}
+METRIC_UNITS = {"max_tcp_error": "m", "max_orientation_error": "rad", "settling_time": "s"}
 
 
-def metric_names(roles: Roles, joints: int) -> list[str]:
-    """The metric columns of an experiment with these roles and ``joints`` joints, in order."""
+def metric_names(roles: Roles, model: RobotModel) -> list[str]:
+    """The metric columns of an experiment with these roles on this robot, in order."""
     names = ["max_tcp_error"] if roles.x_ref else []
+    names += ["max_orientation_error"] if roles.x_ref and task_axes(model)[1] else []
     names += ["max_joint_error"] + (["peak_effort"] if roles.tau else []) + ["settling_time"]
-    for j in range(1, joints + 1):
+    for j in range(1, model.n + 1):
         names += [f"max_joint_error[{j}]", f"rms_joint_error[{j}]", f"final_joint_error[{j}]"]
         names += [f"peak_effort[{j}]"] if roles.tau else []
     return names
@@ -42,6 +47,8 @@ def metrics_of(tracking: Tracking, result: Result, roles: Roles) -> dict[str, fl
     record = {}
     if roles.x_ref:
         record["max_tcp_error"] = float(tracking.tcp_error.max())
+        if tracking.orientation_error is not None:
+            record["max_orientation_error"] = float(tracking.orientation_error.max())
     record["max_joint_error"] = float(tracking.max_error.max())
     if roles.tau:
         record["peak_effort"] = float(tracking.peak_effort.max())

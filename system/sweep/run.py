@@ -159,7 +159,7 @@ def check(design: Design, fmu_dir):
         typed = [{k: (v if k == STEP else coerce(kinds[k], v, f"--vary {k}")) for k, v in run.items()} for run in runs]
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    metrics = metric_names(roles, roles.model().n)
+    metrics = metric_names(roles, roles.model())
     units.update({name: unit for name, unit in METRIC_UNITS.items() if name in metrics})
     return system, roles, metrics, units, typed
 

@@ -32,6 +32,7 @@ demo: $(FMU_STAMP)
 bench: $(FMU_STAMP)
 	$(PY) benchmarks/run.py
 	$(PY) benchmarks/split.py
+	$(PY) benchmarks/split.py --experiment 3rrp-circle --steps 300
 	$(PY) benchmarks/loop.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/sweep.py

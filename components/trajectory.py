@@ -116,6 +116,28 @@ def _positive(value: float, name: str, unit: str) -> float:
     return value
 
 
+class _Profile:
+    """A reference profile: :meth:`evaluate_into` (each subclass's arithmetic, written into given
+    arrays) and :meth:`evaluate` from it; ``dim`` values per order, ``breakpoints`` (s)."""
+
+    dim: int
+
+    def evaluate(self, t: float, snap: bool = True):
+        """Position, velocity and acceleration at time ``t`` (s), each shape (dim,).
+
+        Before its start the profile rests at its first point, after its end at its last. With
+        ``snap``, times within 1e-9 s of a breakpoint are evaluated at the breakpoint (sampled
+        use); without, the exact branch at ``t`` (an integrator working inside one piece).
+        """
+        x, xd, xdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
+        self.evaluate_into(t, x, xd, xdd, snap)
+        return x, xd, xdd
+
+    def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
+                      snap: bool = True) -> None:
+        raise NotImplementedError
+
+
 @dataclass(frozen=True)
 class Segment:
     start: float   # s
@@ -125,7 +147,7 @@ class Segment:
     move: int      # 1-based move number; 0 for a pause
 
 
-class WaypointTrajectory:
+class WaypointTrajectory(_Profile):
     """Moves through waypoints, one LSPB move per leg, with a pause after every move but the last.
 
     Parameters
@@ -209,17 +231,6 @@ class WaypointTrajectory:
         """``t`` moved onto a breakpoint within 1e-9 s (see :func:`snap_to`)."""
         return snap_to(self._break_list, t)
 
-    def evaluate(self, t: float, snap: bool = True):
-        """Reference position, velocity and acceleration at time ``t`` (s), each shape (m,).
-
-        Before 0 the trajectory rests at the first waypoint, after its end at the last. With
-        ``snap``, times within 1e-9 s of a breakpoint are evaluated at the breakpoint (sampled
-        use); without, the exact branch at ``t`` (an integrator working inside one piece).
-        """
-        x, xd, xdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
-        self.evaluate_into(t, x, xd, xdd, snap)
-        return x, xd, xdd
-
     def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
                       snap: bool = True) -> None:
         """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (each shape (m,); no allocation)."""
@@ -246,7 +257,7 @@ class WaypointTrajectory:
         return bool(closed and not opened)
 
 
-class StraightLine:
+class StraightLine(_Profile):
     """A straight line at minimum time under speed and acceleration limits (trapezoidal speed).
 
     The path s(t) runs from 0 to ``length`` along ``direction``: it accelerates at a_max to
@@ -302,15 +313,10 @@ class StraightLine:
         r = T - t
         return self.length - 0.5 * a * r * r, a * r, -a
 
-    def evaluate(self, t: float, snap: bool = True):
-        """Position (m), velocity (m/s), acceleration (m/s^2) at ``t``, each shape (m,)."""
-        x, xd, xdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
-        self.evaluate_into(t, x, xd, xdd, snap)
-        return x, xd, xdd
-
     def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
                       snap: bool = True) -> None:
-        """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (each shape (m,); no allocation)."""
+        """Position (m), velocity (m/s), acceleration (m/s^2) at ``t`` written into ``x``, ``xd``,
+        ``xdd`` (each shape (m,); no allocation)."""
         if snap:
             t = snap_to(self._break_list, t)
         s, v, a = self.path(t)
@@ -321,7 +327,7 @@ class StraightLine:
         np.multiply(d, a, out=xdd)
 
 
-class SynchronizedBangBang:
+class SynchronizedBangBang(_Profile):
     """Minimum-time bang-bang in joint space, every joint finishing at the same time.
 
     Joint j alone needs T_min,j = 2 sqrt(|dq_j| / a_max,j) (accelerate at a_max,j for half the
@@ -359,21 +365,16 @@ class SynchronizedBangBang:
         self._break_list = self.breakpoints.tolist()
         self._half_acceleration = 0.5 * self.acceleration
 
-    def evaluate(self, t: float, snap: bool = True):
-        """Position, velocity and acceleration (joint units) at ``t``, each shape (n,)."""
-        q, qd, qdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
-        self.evaluate_into(t, q, qd, qdd, snap)
-        return q, qd, qdd
-
     def evaluate_into(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                       snap: bool = True) -> None:
-        """:meth:`evaluate` written into ``q``, ``qd``, ``qdd`` (each shape (n,); no allocation)."""
+        """Position, velocity and acceleration (joint units) at ``t`` written into ``q``, ``qd``,
+        ``qdd`` (each shape (n,); no allocation)."""
         if snap:
             t = snap_to(self._break_list, t)
-        if t < 0.0 or self.duration == 0.0 or t >= self.duration:       # at rest
-            q[:] = self.q_start if t < 0.0 or self.duration == 0.0 else self.q_end
-            qd[:] = 0.0
-            qdd[:] = 0.0
+        rest = (self.q_start if t < 0.0 or self.duration == 0.0 else
+                self.q_end if t >= self.duration else None)
+        if rest is not None:
+            q[:], qd[:], qdd[:] = rest, 0.0, 0.0
             return
         a = self.acceleration
         if t < self.switch_time:
@@ -391,7 +392,7 @@ class SynchronizedBangBang:
         np.negative(a, out=qdd)
 
 
-class Circle:
+class Circle(_Profile):
     """Once round a circle in the first two task coordinates, the phase phi(t) by LSPB.
 
     phi runs from 0 to 2 pi in ``duration`` by LSPB (cruise speed ``cruise_factor`` x the mean
@@ -457,16 +458,11 @@ class Circle:
         self._phase.evaluate_into(t, p, v, a)
         return float(p[0]), float(v[0]), float(a[0])
 
-    def evaluate(self, t: float, snap: bool = True):
-        """Position, velocity and acceleration (task units) at ``t``, each shape (dim,)."""
-        x, xd, xdd = np.empty(self.dim), np.empty(self.dim), np.empty(self.dim)
-        self.evaluate_into(t, x, xd, xdd, snap)
-        return x, xd, xdd
-
     def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
                       snap: bool = True) -> None:
-        """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (each shape (dim,)), in float
-        arithmetic (a handful of numbers: NumPy's per-call overhead would cost more)."""
+        """Position, velocity and acceleration (task units) at ``t`` written into ``x``, ``xd``,
+        ``xdd`` (each shape (dim,)), in float arithmetic (a handful of numbers: NumPy's per-call
+        overhead would cost more)."""
         if snap:
             t = snap_to(self._break_list, t)
         phi, w, alpha = self.phase(t)

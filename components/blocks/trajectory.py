@@ -57,15 +57,10 @@ class _Reference(Block):
                     raise ValueError(f"the parameters give a non-finite reference {what} at t = {t:g} s "
                                      f"({np.asarray(value).tolist()})")
         self._views = tuple(self.values[s] for s in self.outputs)   # made once: values is never replaced
-        self._into = getattr(self.profile, "evaluate_into", None)
         super().configure()
 
     def output(self, t):
-        if self._into is not None:
-            self._into(t, *self._views, self.snap)
-            return
-        p, v, a = self.outputs
-        self.values[p], self.values[v], self.values[a] = self.profile.evaluate(t, self.snap)
+        self.profile.evaluate_into(t, *self._views, self.snap)
 
     def breakpoints(self):
         return self.profile.breakpoints
@@ -134,7 +129,7 @@ class WaypointsBlock(_Reference):
 
     def output(self, t):
         if not self.has_grip:
-            self.profile.evaluate_into(t, *self._views, self.snap)
+            super().output(t)
             return
         snapped = self.profile.snap(t)        # the grip always snaps; snapped once for both
         self.values[self.grip] = self.profile.grip(snapped, snap=False)

@@ -187,7 +187,7 @@ class Planar3RRP(RobotModel):
         self._home = list(home)
         self._last = (None, None)          # the last configuration _checked and its legs
         self.payload = 0.0
-        self._inertia = self.end_effector_inertia          # diag(M_E), kept with the payload
+        self._inertia = tuple(self.end_effector_inertia.tolist())    # diag(M_E), kept with the payload
         self.set_gravity(description.gravity if gravity is None else gravity)
 
     # -- units, limits, parameters ----------------------------------------------------------------
@@ -217,7 +217,7 @@ class Planar3RRP(RobotModel):
         if not (math.isfinite(mass) and mass >= 0.0):
             raise ValueError(f"payload mass must be finite and >= 0 kg, got {mass}")
         self.payload = mass
-        self._inertia = self.end_effector_inertia
+        self._inertia = tuple(self.end_effector_inertia.tolist())
 
     def independent_dynamics(self, **baumgarte):
         """A second, independent formulation of this mechanism's dynamics, for cross-checks:
@@ -244,7 +244,7 @@ class Planar3RRP(RobotModel):
     def _direct_measure(self, q: np.ndarray) -> np.ndarray:
         """|V| = |sum_i exp(j (q_i - alpha_i))| = sum_i c_i for q (..., 3): 0 at a direct
         singularity, at most 3."""
-        d = np.moveaxis(np.asarray(q, dtype=float), -1, 0) - self.alpha.reshape((3,) + (1,) * (np.ndim(q) - 1))
+        d = np.moveaxis(np.asarray(q, dtype=float), -1, 0) - self._legwise(self.alpha, np.ndim(q) - 1)
         return np.hypot(np.sin(d).sum(0), np.cos(d).sum(0))
 
     def _pose(self, q):
@@ -561,12 +561,7 @@ class Planar3RRP(RobotModel):
         values = pose.tolist()
         if pose.shape != (3,) or not all(map(math.isfinite, values)):
             raise ValueError(f"pose: needs 3 finite values (x, y, theta), got {values}")
-        if near is None:
-            ref = self._home
-        else:
-            ref = np.asarray(near, dtype=float).tolist()
-            if len(ref) != 3 or np.ndim(near) != 1:
-                raise ValueError(f"near: needs 3 joint angles, got shape {np.shape(near)}")
+        ref = self._home if near is None else _three(near, "near", "joint angles")
         q = np.array(self._ik(values, _branch_signs(branch), ref))
         if not math.isfinite(q.dot(q)):
             p = self.line_distances_many(pose)
@@ -587,13 +582,13 @@ class Planar3RRP(RobotModel):
         k = self._checked(q)
         J = self._jacobian(k)
         a1, a2, a3 = self._jdot_qdot(k, J, _rates(qd))
-        w1, w2, w3 = self._inertia.tolist()
+        w1, w2, w3 = self._inertia
         return J, _transposed_times(J, (w1 * a1, w2 * a2, w3 * a3))
 
     def _mass(self, J) -> np.ndarray:
         """M = I_O 1 + J^T M_E J (3, 3), exactly symmetric, from J as rows of three floats:
         M_jk = I_O delta_jk + sum_i w_i J_ij J_ik."""
-        w1, w2, w3 = self._inertia.tolist()
+        w1, w2, w3 = self._inertia
         i_o = self.link_inertia_O
         (a, b, c), (d, e, f), (g, h, i) = J
         m12 = w1 * a * b + w2 * d * e + w3 * g * h
@@ -615,7 +610,7 @@ class Planar3RRP(RobotModel):
     def coriolis_matrix(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """C(q, qd) = J^T M_E Jdot (C qd = N; Mdot - 2C skew)."""
         J = self.jacobian(q)
-        return J.T @ (self._inertia[:, None] * self.jacobian_dot(q, qd))
+        return J.T @ (self.end_effector_inertia[:, None] * self.jacobian_dot(q, qd))
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """Zero: gravity is perpendicular to the plane of motion."""
@@ -649,7 +644,7 @@ class Planar3RRP(RobotModel):
         """1/2 sum_i I_O qd_i^2 + 1/2 xd^T M_E xd (J)."""
         qd = np.asarray(qd, dtype=float)
         xd = self.jacobian(q) @ qd
-        return float(0.5 * self.link_inertia_O * qd @ qd + 0.5 * xd @ (self._inertia * xd))
+        return float(0.5 * self.link_inertia_O * qd @ qd + 0.5 * xd @ (self.end_effector_inertia * xd))
 
     def potential_energy(self, q: np.ndarray) -> float:
         """Zero: gravity does no work in the horizontal plane."""
@@ -725,20 +720,22 @@ def _transposed_times(J, v) -> tuple:
     return (a * v[0] + d * v[1] + g * v[2], b * v[0] + e * v[1] + h * v[2], c * v[0] + f * v[1] + i * v[2])
 
 
-def _wrench(f_ext) -> list:
-    """An end-effector wrench (Fx, Fy, Mz) as three floats."""
-    f = np.asarray(f_ext, dtype=float)
-    if f.shape != (3,):
-        raise ValueError(f"f_ext: needs 3 values (Fx, Fy, Mz), got shape {f.shape}")
-    return f.tolist()
+def _three(values, name: str, what: str) -> list:
+    """``values`` (shape (3,)) as three floats; ValueError naming ``name`` (``what``: the three)."""
+    v = np.asarray(values, dtype=float)
+    if v.shape != (3,):
+        raise ValueError(f"{name}: needs 3 {what}, got shape {v.shape}")
+    return v.tolist()
 
 
 def _rates(qd) -> list:
     """Joint rates (3,) as floats."""
-    qd = np.asarray(qd, dtype=float)
-    if qd.shape != (3,):
-        raise ValueError(f"qd: needs 3 joint rates, got shape {qd.shape}")
-    return qd.tolist()
+    return _three(qd, "qd", "joint rates")
+
+
+def _wrench(f_ext) -> list:
+    """An end-effector wrench (Fx, Fy, Mz) as three floats."""
+    return _three(f_ext, "f_ext", "values (Fx, Fy, Mz)")
 
 
 _BRANCH_SIGNS = {branch: tuple(1.0 if ch == "+" else -1.0 for ch in branch) for branch in BRANCHES}

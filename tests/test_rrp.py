@@ -256,6 +256,32 @@ def test_ik_round_trip_along_reference_line(pinmodel):
     assert err_pin < 1e-12, err_pin
 
 
+
+def test_project_ik_round_trips_along_the_line_and_its_rates_are_differences_of_its_positions():
+    """The project's solver (the description's ``spherical``, as the IK block runs it) along the
+    reference line: FK(IK(x)) = x to 1e-12 m (FK written from the specification), and its qd,
+    qdd (from J and J-dot q-dot) equal central differences of its positions, away from the
+    trapezoid's switches (where the acceleration jumps)."""
+    from robofmu.components.ik import make_solver
+    from robofmu.components.robots import load_model
+    from robofmu.components.trajectory import StraightLine
+
+    solver = make_solver(load_model("rrp"))
+    assert solver.kind == "spherical"
+    line = StraightLine(fk_closed_form(HOME_Q), DIRECTION, L_PATH, V_MAX, A_MAX)
+    h, checked = 1e-5, 0
+    for t in np.arange(0.005, line.duration, 0.011):
+        x, xd, xdd = line.evaluate(t)
+        q, qd, qdd = solver.solve(x, xd, xdd)
+        assert np.max(np.abs(fk_closed_form(q) - x)) < 1e-12
+        if np.min(np.abs(t - np.asarray(line.breakpoints))) < 1e-3:
+            continue
+        qp, qm = solver.position(line.evaluate(t + h)[0]), solver.position(line.evaluate(t - h)[0])
+        np.testing.assert_allclose(qd, (qp - qm) / (2 * h), rtol=0, atol=1e-9)      # |qd| up to 0.12
+        np.testing.assert_allclose(qdd, (qp - 2 * q + qm) / h**2, rtol=0, atol=2e-5)  # |qdd| up to 0.28
+        checked += 1
+    assert checked > 150
+
 # =============================================================================================
 # 3. The seed's Appendix A.2 table
 # =============================================================================================

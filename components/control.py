@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .floats import FloatWriter
 from .robots.model import RobotModel
 
 
@@ -35,7 +36,8 @@ class ComputedTorque:
         self.robot = robot
         self.kp, self.kd, self.ki = float(kp), float(kd), float(ki)
         self.z = np.zeros(robot.n)
-        self._error, self._command = np.zeros(robot.n), np.zeros(robot.n)
+        self._command = np.zeros(robot.n)
+        self._write_command, self._write_integral = FloatWriter(self._command), FloatWriter(self.z)
 
     def torque(self, q_ref, qd_ref, qdd_ref, q, qd) -> np.ndarray:
         """Joint torques/forces (N.m or N), shape (n,), at the current instant."""
@@ -45,22 +47,21 @@ class ComputedTorque:
         return out
 
     def torque_into(self, q_ref, qd_ref, qdd_ref, q, qd, out: np.ndarray) -> None:
-        """:meth:`torque` of arrays of shape (n,), written into ``out`` (no allocation)."""
-        e, u = self._error, self._command
-        np.subtract(qd_ref, qd, out=e)               # u = ((qdd_ref + kd e') + kp e) + ki z
-        np.multiply(e, self.kd, out=e)
-        np.add(qdd_ref, e, out=u)
-        np.subtract(q_ref, q, out=e)
-        np.multiply(e, self.kp, out=e)
-        np.add(u, e, out=u)
-        if self.ki != 0.0:                           # PD: u + 0 z is u
-            np.multiply(self.z, self.ki, out=e)
-            np.add(u, e, out=u)
-        self.robot.inverse_dynamics_into(q, qd, u, out)    # M(q) u + N(q, qd) in one pass (RNEA)
+        """:meth:`torque` of arrays of shape (n,), written into ``out`` (no allocation of arrays).
+
+        The command u = ((qdd_ref + kd e') + kp e) + ki z is computed in floats, element by element
+        (n values: see :mod:`~robofmu.components.floats`)."""
+        kp, kd, ki = self.kp, self.kd, self.ki
+        if ki != 0.0:
+            self._write_command([a + (b - c) * kd + (d - e) * kp + z * ki for a, b, c, d, e, z in
+                                 zip(qdd_ref.tolist(), qd_ref.tolist(), qd.tolist(), q_ref.tolist(), q.tolist(),
+                                     self.z.tolist())])
+        else:                                        # PD: u + 0 z is u
+            self._write_command([a + (b - c) * kd + (d - e) * kp for a, b, c, d, e in
+                                 zip(qdd_ref.tolist(), qd_ref.tolist(), qd.tolist(), q_ref.tolist(), q.tolist())])
+        self.robot.inverse_dynamics_into(q, qd, self._command, out)    # M(q) u + N(q, qd) in one pass (RNEA)
 
     def advance(self, q_ref, q, h: float) -> None:
-        """Integrate the error over a step of ``h`` seconds (error held at its current value)."""
-        e = self._error
-        np.subtract(q_ref, q, out=e)
-        np.multiply(e, h, out=e)
-        np.add(self.z, e, out=self.z)
+        """Integrate the error over a step of ``h`` seconds (error held at its current value):
+        z + (q_ref - q) h, in floats."""
+        self._write_integral([z + (a - b) * h for z, a, b in zip(self.z.tolist(), q_ref.tolist(), q.tolist())])

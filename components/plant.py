@@ -2,9 +2,12 @@
 from __future__ import annotations
 
 import math
+from itertools import repeat
+from operator import add, mul
 
 import numpy as np
 
+from .floats import FloatWriter
 from .robots.model import RobotModel
 
 
@@ -40,17 +43,10 @@ class Plant:
         if self.x.shape != (2 * self.n,) or not np.all(np.isfinite(self.x)):
             raise ValueError(f"q0/qd0: need {self.n} finite values each")
         self.grip = False
-        n, size = self.n, 2 * self.n
-        # RK4's four stages, a row each: (q, qd, qdd) of the stage's state. k_i = (qd, qdd) is then
-        # the row's last 2n values, a view: no copy of qd into k. Row 0's state is the work state.
-        self._rows = np.zeros((4, 3 * n))
-        self._states = [row[:size] for row in self._rows]
-        self._slopes = self._rows[:, n:]                       # k1 .. k4, shape (4, 2n)
-        self._parts = [(row[:n], row[n:size], row[size:]) for row in self._rows]     # q, qd, qdd
-        self._weights = np.array([[1.0], [2.0], [2.0], [1.0]])  # k1 + 2 k2 + 2 k3 + k4
-        self._weighted = np.zeros((4, size))
-        self._total = np.zeros(size)
-        self._ones = np.ones(size)
+        # One stage state of RK4 at a time: (q, qd) in one array, its halves the model's inputs
+        self._stage = np.zeros(2 * self.n)
+        self._stage_q, self._stage_qd = self._stage[: self.n], self._stage[self.n:]
+        self._write_stage = FloatWriter(self._stage)
 
     @property
     def q(self) -> np.ndarray:
@@ -82,49 +78,45 @@ class Plant:
         where the model takes one) held; returns the new state (q, qd).
 
         Classical RK4 in ceil(h / max_substep) equal sub-steps, the arithmetic of
-        :func:`~robofmu.components.integrators.rk4` element for element, in buffers of the plant's
-        own (no allocation per step beyond the model's results).
+        :func:`~robofmu.components.integrators.rk4` element for element, in floats (2n values:
+        see :mod:`~robofmu.components.floats`); the model takes each stage's state from one
+        buffer of the plant's.
 
         Raises PlantDiverged naming the joint and the time if the state turns non-finite; the
         state is then left as it was before the step.
         """
         substeps = max(1, math.ceil(h / self.max_substep - 1e-9))
         dt = h / substeps
-        half, sixth = 0.5 * dt, dt / 6.0
-        x, s2, s3, s4 = self._states
-        (xq, xv, a1), (q2, v2, a2), (q3, v3, a3), (q4, v4, a4) = self._parts
-        k1, k2, k3, _ = self._slopes
-        weights, weighted, total = self._weights, self._weighted, self._total
-        multiply, add = np.multiply, np.add
+        half, sixth, two = repeat(0.5 * dt), repeat(dt / 6.0), repeat(2.0)
+        full = repeat(dt)
+        n = self.n
+        q, qd, write = self._stage_q, self._stage_qd, self._write_stage
         if f_ext is None:
-            dynamics = self.robot.forward_dynamics_into
+            dynamics = self.robot.forward_dynamics_floats
         else:
             wrench = self.robot.forward_dynamics
 
-            def dynamics(q, qd, tau, out):
-                out[:] = wrench(q, qd, tau, f_ext)
-        x[:] = self.x
+            def dynamics(q, qd, tau):
+                return wrench(q, qd, tau, f_ext).tolist()
+        x = self.x.tolist()
         for _ in range(substeps):
-            dynamics(xq, xv, tau, a1)                # k1 = (qd, qdd) at x
-            multiply(k1, half, s2)
-            add(x, s2, s2)                           # x + (dt/2) k1
-            dynamics(q2, v2, tau, a2)
-            multiply(k2, half, s3)
-            add(x, s3, s3)
-            dynamics(q3, v3, tau, a3)
-            multiply(k3, dt, s4)
-            add(x, s4, s4)
-            dynamics(q4, v4, tau, a4)
-            # (dt/6) (k1 + 2 k2 + 2 k3 + k4), summed left to right (a reduction over the rows
-            # adds them in row order), then x += it: integrators.rk4's arithmetic
-            multiply(self._slopes, weights, weighted)
-            add.reduce(weighted, axis=0, out=total)
-            multiply(total, sixth, total)
-            add(x, total, x)
-        if not math.isfinite(x.dot(self._ones)):      # nan and inf propagate through the sum
-            bad = np.flatnonzero(~np.isfinite(x))
-            if bad.size:
-                n = self.n
+            write(x)
+            k1 = x[n:] + dynamics(q, qd, tau)                      # (qd, qdd) at x
+            s = list(map(add, x, map(mul, k1, half)))              # x + (dt/2) k1
+            write(s)
+            k2 = s[n:] + dynamics(q, qd, tau)
+            s = list(map(add, x, map(mul, k2, half)))
+            write(s)
+            k3 = s[n:] + dynamics(q, qd, tau)
+            s = list(map(add, x, map(mul, k3, full)))
+            write(s)
+            k4 = s[n:] + dynamics(q, qd, tau)
+            # x + (dt/6) (((k1 + 2 k2) + 2 k3) + k4), summed left to right: integrators.rk4's arithmetic
+            total = map(add, map(add, map(add, k1, map(mul, k2, two)), map(mul, k3, two)), k4)
+            x = list(map(add, x, map(mul, total, sixth)))
+        if not math.isfinite(sum(x)):                  # nan and inf propagate through the sum
+            bad = [k for k, value in enumerate(x) if not math.isfinite(value)]
+            if bad:
                 j = bad[0] % n + 1
                 what = "q" if bad[0] < n else "qd"
                 raise PlantDiverged(

@@ -40,6 +40,19 @@ def _say(command: str, exc_or_text) -> None:
     print(f"robofmu {command}: {text}", file=sys.stderr)
 
 
+def _stopped(command: str, exc: BaseException, after: str = "") -> int:
+    """Say on one line why ``command`` stopped (``after`` appended) and return its exit status:
+    130 interrupted (Ctrl-C: a run's Interrupted, a sweep's SweepInterrupted), 1 a run that failed
+    (SimulationError), 2 a user's mistake (ValueError: usage, experiment, diagram, design; a
+    scheduler that cannot be reached)."""
+    from robofmu.system.master import Interrupted, SimulationError
+
+    _say(command, f"{_one_line(exc)}{after}")
+    if isinstance(exc, (Interrupted, KeyboardInterrupt)):
+        return 130
+    return 1 if isinstance(exc, SimulationError) else 2
+
+
 def _build(args) -> int:
     from robofmu.components.robots import available
     from robofmu.system.runner import UsageError, check_writable
@@ -78,7 +91,7 @@ def _default_out(experiment: str) -> Path:
 
 
 def _run(args) -> int:
-    from robofmu.system.master import Interrupted, SimulationError
+    from robofmu.system.master import SimulationError
     from robofmu.system.runner import run_experiment
     from robofmu.system.sweep.design import parse_setting
 
@@ -88,15 +101,8 @@ def _run(args) -> int:
         run = run_experiment(args.experiment, out, fmu_dir=args.fmus, step=args.step,
                              stop_time=args.stop, algorithm=args.algorithm, parameters=parameters,
                              results_format=args.format)
-    except Interrupted as exc:
-        _say("run", exc)
-        return 130
-    except SimulationError as exc:
-        _say("run", exc)
-        return 1
-    except ValueError as exc:          # UsageError, ExperimentError, DiagramError
-        _say("run", exc)
-        return 2
+    except (SimulationError, ValueError) as exc:      # ValueError: UsageError, ExperimentError, DiagramError
+        return _stopped("run", exc)
     print(run.section)
     print(f"\nwrote {out / ('results.' + args.format)}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
     return 0
@@ -113,12 +119,8 @@ def _sweep(args) -> int:
         run = run_sweep(design, out, fmu_dir=args.fmus, workers=args.workers, scheduler=args.scheduler,
                         keep_results=args.keep_results, retry_failed=args.retry_failed, metric=args.metric,
                         threshold=args.threshold)
-    except SweepInterrupted as exc:
-        _say("sweep", exc)
-        return 130
-    except (ValueError, ConnectionError) as exc:    # UsageError, DesignError, ExperimentError, DiagramError;
-        _say("sweep", exc)                          # a scheduler that cannot be reached
-        return 2
+    except (SweepInterrupted, ValueError, ConnectionError) as exc:    # ValueError: UsageError, DesignError,
+        return _stopped("sweep", exc)                                 # ExperimentError, DiagramError
     failed = len(run.failed)
     print(f"{len(run.rows)} runs ({run.ran} now, {run.reused} reused), {failed} failed; wrote "
           f"{out / 'sweep.csv'}, {out / 'sweep.parquet'}, {out / 'report.md'} and {len(run.figures)} figures")
@@ -137,8 +139,7 @@ def _ssp(args) -> int:
         check_fmu_folder(system)
         written = export_ssp(system, out, inline=args.inline)
     except ValueError as exc:          # UsageError, ExperimentError, DiagramError
-        _say("ssp", exc)
-        return 2
+        return _stopped("ssp", exc)
     except OSError as exc:
         _say("ssp", f"cannot write {out}: {exc.strerror or exc}")
         return 1
@@ -152,15 +153,8 @@ def _demo(args) -> int:
 
     try:
         return demo(Path(args.out), fmu_dir=args.fmus, quick=args.quick)
-    except Interrupted as exc:
-        _say("demo", f"{_one_line(exc)}; {args.out} left as it was")
-        return 130
-    except SimulationError as exc:
-        _say("demo", exc)
-        return 1
-    except ValueError as exc:          # UsageError, ExperimentError, DiagramError
-        _say("demo", exc)
-        return 2
+    except (SimulationError, ValueError) as exc:      # ValueError: UsageError, ExperimentError, DiagramError
+        return _stopped("demo", exc, f"; {args.out} left as it was" if isinstance(exc, Interrupted) else "")
 
 
 def _workspace(args) -> int:
@@ -179,8 +173,7 @@ def _workspace(args) -> int:
         folder = OutputFolder(out, owned=lambda e: e.is_file() and e.suffix in (".md", ".png"))
         staging = folder.open()
     except ValueError as exc:            # UsageError
-        _say("workspace", exc)
-        return 2
+        return _stopped("workspace", exc)
     try:
         result = workspace.run(study, grids, progress=lambda line: print(f"  {line}", file=sys.stderr))
         workspace.write(result, staging)

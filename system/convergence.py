@@ -138,14 +138,13 @@ def errors(result: Result, reference: Result, roles: Roles, model=None) -> dict[
     dq = np.abs(q - q_mono)
     k = int(np.argmax(dq.max(axis=1)))
     position = task_axes(model)[0]
-    tcp = np.array([model.fk(v) for v in q])[:, position]
-    tcp_mono = np.array([model.fk(v) for v in q_mono])[:, position]
+    poses, poses_mono = roles.poses(result, model), roles.poses(reference, model)
     out = {"q_error": float(dq.max()), "q_error_at": float(result.time[k]),
-           "tcp_error": float(np.linalg.norm(tcp - tcp_mono, axis=1).max()),
+           "tcp_error": float(np.linalg.norm(poses[:, position] - poses_mono[:, position], axis=1).max()),
            "tracking": math.nan, "qd_error": math.nan}
     if roles.qd is not None:
         out["qd_error"] = float(np.abs(result.vector(roles.qd) - reference.vector(roles.qd)).max())
-    tracking = roles.tcp_error(result, model)
+    tracking = roles.tcp_error(result, model, poses)
     if tracking is not None:
         out["tracking"] = float(tracking.max())
     return out

@@ -64,21 +64,30 @@ class Roles:
         self.require(role)
         return result.vector(getattr(self, role))
 
-    def tcp_error(self, result: Result, model: RobotModel | None = None) -> np.ndarray | None:
+    def tcp_error(self, result: Result, model: RobotModel | None = None,
+                  poses: np.ndarray | None = None) -> np.ndarray | None:
         """The task point's distance |FK(q) - x_ref| (m) at every recorded point, over the task
         coordinates measured in m (:func:`task_axes`; a pose's angle is apart, see
-        :meth:`orientation_error`), or None without an x_ref role."""
-        errors = self.task_errors(result, model)
+        :meth:`task_errors`), or None without an x_ref role. ``poses``: as in :meth:`task_errors`."""
+        errors = self.task_errors(result, model, poses)
         return None if errors is None else errors[0]
 
-    def task_errors(self, result: Result, model: RobotModel | None = None):
+    def poses(self, result: Result, model: RobotModel | None = None) -> np.ndarray:
+        """FK(q) at every recorded point, shape (k, m) (task units)."""
+        model = model or self.model()
+        return np.array([model.fk(v) for v in self.vector(result, "q")])
+
+    def task_errors(self, result: Result, model: RobotModel | None = None, poses: np.ndarray | None = None):
         """(position, orientation) errors at every recorded point, FK(q) against x_ref: the
         task point's distance (m, :meth:`tcp_error`) and max_i |FK(q)_i - x_ref_i| (rad) over
-        the coordinates measured in rad (None where the task has none); None without an x_ref role."""
+        the coordinates measured in rad (None where the task has none); None without an x_ref role.
+        ``poses``: FK(q) of the result where the caller has it (:meth:`poses`), else computed."""
         if self.x_ref is None or self.q is None:
             return None
         model = model or self.model()
-        difference = np.array([model.fk(v) for v in result.vector(self.q)]) - result.vector(self.x_ref)
+        if poses is None:
+            poses = self.poses(result, model)
+        difference = poses - result.vector(self.x_ref)
         position, angle = task_axes(model)
         return (np.linalg.norm(difference[:, position], axis=1),
                 np.abs(difference[:, angle]).max(axis=1) if angle else None)

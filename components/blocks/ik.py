@@ -99,11 +99,12 @@ class IKBlock(Block):
             finally:
                 for name, k in self.diagnostics:
                     v[k] = self.solver.report[name]
-            if any(abs(rate) > limit for rate, limit in zip(qd.tolist(), self._limits)):
-                fastest = int(np.argmax(np.abs(qd) / self.qd_limit))
-                raise Unreachable(f"too close to a singularity: joint rate qd_ref[{fastest + 1}] = "
-                                  f"{qd[fastest]:.6g} exceeds qd_limit[{fastest + 1}] = "
-                                  f"{self.qd_limit[fastest]:g} at q = {np.round(q, 6).tolist()}")
+            for rate, limit in zip(qd.tolist(), self._limits):
+                if abs(rate) > limit:
+                    fastest = int(np.argmax(np.abs(qd) / self.qd_limit))
+                    raise Unreachable(f"too close to a singularity: joint rate qd_ref[{fastest + 1}] = "
+                                      f"{qd[fastest]:.6g} exceeds qd_limit[{fastest + 1}] = "
+                                      f"{self.qd_limit[fastest]:g} at q = {np.round(q, 6).tolist()}")
         except Unreachable as exc:
             if not self.outside:
                 held = ("holding the last valid solution" if self.last is not None else

@@ -17,7 +17,7 @@ from typing import ClassVar
 import math
 
 import numpy as np
-from scipy.linalg.lapack import dgetrf as getrf, dgetrs as getrs
+from scipy.linalg.lapack import dgesv as gesv, dgetrs as getrs
 
 from ..parameters import Parameter, ParameterError, resolve
 from ..robots.model import RobotModel
@@ -90,7 +90,7 @@ class IKSolver:
         self._A = np.zeros((n, n))                 # A = [J; C]: the constraint rows set once
         self._A[m:] = self.constraint_rows
         self._rhs = np.zeros(n)                    # [xd; 0], then [xdd - Jdot qd; 0]
-        self._ones = np.ones(n)
+        self._rhs_task = self._rhs[:m]             # its first m rows, a view
 
     def setup(self) -> None:
         """Read the parameters (``self.values``) and robot geometry; set ``constraint_rows``."""
@@ -121,16 +121,16 @@ class IKSolver:
         """
         A, rhs, m = self._A, self._rhs, self.robot.m
         A[:m] = self.robot.jacobian(q)
-        # One LU factorization (LAPACK getrf, as numpy.linalg.solve does) for both right-hand
-        # sides, called directly: numpy.linalg.solve costs several times the arithmetic of a 4 x 4.
-        lu, pivots, singular = getrf(A)
+        # One LU factorization for both right-hand sides, LAPACK called directly (numpy.linalg.solve
+        # costs several times the arithmetic of a 4 x 4): gesv factors A and solves for qd (getrf
+        # then getrs, as numpy.linalg.solve does), getrs reuses the factors for qdd.
+        self._rhs_task[:] = xd
+        lu, pivots, qd, singular = gesv(A, rhs)
         if singular:
             raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
-        rhs[:m] = xd
-        qd = getrs(lu, pivots, rhs)[0]
-        np.subtract(xdd, self.robot.jdot_qdot(q, qd), out=rhs[:m])
+        np.subtract(xdd, self.robot.jdot_qdot(q, qd), out=self._rhs_task)
         qdd = getrs(lu, pivots, rhs)[0]
-        if not math.isfinite(qd.dot(self._ones) + qdd.dot(self._ones)):    # nan and inf propagate
+        if not math.isfinite(sum(qd.tolist()) + sum(qdd.tolist())):    # nan and inf propagate
             raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
         return qd, qdd
 

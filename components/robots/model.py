@@ -118,9 +118,9 @@ class RobotModel(ABC):
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """qdd = M^-1 (tau - N), shape (n,)."""
 
-    def forward_dynamics_into(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, out: np.ndarray) -> None:
-        """:meth:`forward_dynamics` written into ``out`` (n,) (a model may spare the copy of its result)."""
-        out[:] = self.forward_dynamics(q, qd, tau)
+    def forward_dynamics_floats(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> list[float]:
+        """:meth:`forward_dynamics` as a list of n floats (a model may spare the array of its result)."""
+        return self.forward_dynamics(q, qd, tau).tolist()
 
     @abstractmethod
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:

@@ -383,8 +383,7 @@ class Planar3RRP(RobotModel):
         with np.errstate(invalid="ignore", divide="ignore"):
             sd, cd, V, S, C, _, x, y = self._pose(self._legs_first(q))
             cp, sp = self._directions(V, S, C)
-            c = [(cd[i] * C + sd[i] * S) / V for i in range(3)]
-            return self._matrix_last(_array(self._jacobian_from(V, x, y, cp, sp, c)))
+            return self._matrix_last(_array(self._jacobian_from(V, x, y, cp, sp, _link_cosines(sd, cd, V, S, C))))
 
     def jdot_qdot_many(self, q, qd) -> np.ndarray:
         """Jdot(q, qd) qd, shapes (..., 3) -> (..., 3)."""
@@ -405,7 +404,7 @@ class Planar3RRP(RobotModel):
         0 at an inverse singularity (c_i = 0), NaN at a direct one."""
         with np.errstate(invalid="ignore", divide="ignore"):
             sd, cd, V, S, C, _, _, _ = self._pose(self._legs_first(q))
-            c = _array([(cd[i] * C + sd[i] * S) / V for i in range(3)])
+            c = _array(_link_cosines(sd, cd, V, S, C))
             return self.r ** 2 * c.prod(0) / (self._sin_offsets * V)
 
     def singular_values_many(self, q, theta_scale: float = 1.0, exact: bool = False) -> np.ndarray:
@@ -712,6 +711,13 @@ def _functions(value):
 def _array(values) -> np.ndarray:
     """Per-leg (or nested row) values as one array, the legs (rows) on axis 0."""
     return np.array(values, dtype=float) if not isinstance(values, np.ndarray) else values
+
+
+def _link_cosines(sd, cd, V, S, C) -> list:
+    """c_i = cos(q_i - phi_i) = (cd_i C + sd_i S) / V (:meth:`Planar3RRP._pose`) of many
+    configurations (arrays, one division per leg); one configuration's, in floats, are
+    :meth:`Planar3RRP._legs`'."""
+    return [(cd[i] * C + sd[i] * S) / V for i in range(3)]
 
 
 def _transposed_times(J, v) -> tuple:

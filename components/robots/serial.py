@@ -93,7 +93,7 @@ class SerialRobot(RobotModel):
     # -- kinematics -------------------------------------------------------------------------
     def fk(self, q: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q)
-        return pin.updateFramePlacement(self.model, self.data, self.task_id).translation[self._axes]
+        return pin.updateFramePlacement(self.model, self.data, self.task_id).translation[self._rows]
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         return pin.computeFrameJacobian(self.model, self.data, q, self.task_id,
@@ -102,7 +102,7 @@ class SerialRobot(RobotModel):
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q, qd, self._zero)
         return pin.getFrameClassicalAcceleration(self.model, self.data, self.task_id,
-                                                 pin.LOCAL_WORLD_ALIGNED).linear[self._axes]
+                                                 pin.LOCAL_WORLD_ALIGNED).linear[self._rows]
 
     # -- dynamics ---------------------------------------------------------------------------
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
@@ -124,8 +124,8 @@ class SerialRobot(RobotModel):
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         return pin.rnea(self.model, self.data, q, qd, qdd).copy()
 
-    def forward_dynamics_into(self, q, qd, tau, out) -> None:
-        out[:] = pin.aba(self.model, self.data, q, qd, tau)
+    def forward_dynamics_floats(self, q, qd, tau) -> list[float]:
+        return pin.aba(self.model, self.data, q, qd, tau).tolist()
 
     def inverse_dynamics_into(self, q, qd, qdd, out) -> None:
         out[:] = pin.rnea(self.model, self.data, q, qd, qdd)

@@ -385,6 +385,16 @@ typedef struct {
 /* The registration slot of the fmi2Instantiate (or fmi2Reset) under way in this thread. */
 static __thread Fast* registering = NULL;
 
+/* Runs `call` (pythonfmu's fmi2Instantiate or fmi2Reset: it constructs the slave, which
+   registers) with this thread's registration slot at `slot`, then restores the slot. */
+#define WHILE_REGISTERING(slot, call)                                                         \
+    do {                                                                                      \
+        Fast* outer_ = registering;                                                           \
+        registering = &(slot);                                                                \
+        call;                                                                                 \
+        registering = outer_;                                                                 \
+    } while (0)
+
 /* Called by robofmu's slave at the end of its construction (ctypes); 1 if registered.
    quiet_var and quiet_value: both NULL, or NumPy's error-state context variable and the state
    to set in it around every call of refresh(), step() and nonfinite() (set, then reset). */
@@ -691,11 +701,9 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     in->name = strdup(instanceName ? instanceName : "");
     in->last_successful_time = NAN;     /* pythonfmu's start values */
     Fast pending = FAST_NONE;
-    Fast* outer = registering;
-    registering = &pending;             /* the slave registers while pythonfmu constructs it */
-    in->stock = stock.fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
-                                      &in->inner, visible, fmi2True);
-    registering = outer;
+    WHILE_REGISTERING(pending, in->stock = stock.fmi2Instantiate(instanceName, fmuType, fmuGUID,
+                                                                 fmuResourceLocation, &in->inner,
+                                                                 visible, fmi2True));
     if (in->stock == NULL) {            /* pythonfmu has logged why (fmi2Fatal: always shown) */
         fast_release(&pending);
         free(in->name);
@@ -760,10 +768,8 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     ENTER(c);
     fast_release(&in->fast);
     Fast pending = FAST_NONE;
-    Fast* outer = registering;
-    registering = &pending;
-    fmi2Status s = stock.fmi2Reset(in->stock);
-    registering = outer;
+    fmi2Status s;
+    WHILE_REGISTERING(pending, s = stock.fmi2Reset(in->stock));
     in->fast = pending;
     return finish(in, s);
 }

@@ -61,27 +61,27 @@ class _LSPBPiece:
             self.minus_a = -self.a
             self.cruise_start = self.x0 + self.half_a * self.tb * self.tb
             self.end = self.x0 + dx
-        # the same constants as floats: a move has m values, and NumPy's ufuncs cost more per
-        # call than Python's arithmetic on so few (the same operations, in the same order)
-        self._x0, self._a, self._half_a, self._V, self._cruise_start, self._end = (
-            v.tolist() for v in (self.x0, self.a, self.half_a, self.V, self.cruise_start, self.end))
 
     def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray) -> None:
         T, tb = self.T, self.tb
         t = min(max(t, 0.0), T)
         if t < tb:
-            x[:] = [x0 + half_a * t * t for x0, half_a in zip(self._x0, self._half_a)]
-            xd[:] = [a * t for a in self._a]
+            np.multiply(self.half_a, t, out=x)
+            np.multiply(x, t, out=x)
+            np.add(self.x0, x, out=x)
+            np.multiply(self.a, t, out=xd)
             xdd[:] = self.a
         elif t <= T - tb:
-            cruise = t - tb
-            x[:] = [start + v * cruise for start, v in zip(self._cruise_start, self._V)]
+            np.multiply(self.V, t - tb, out=x)
+            np.add(self.cruise_start, x, out=x)
             xd[:] = self.V
             xdd[:] = 0.0
         else:
             r = T - t
-            x[:] = [end - half_a * r * r for end, half_a in zip(self._end, self._half_a)]
-            xd[:] = [a * r for a in self._a]
+            np.multiply(self.half_a, r, out=x)
+            np.multiply(x, r, out=x)
+            np.subtract(self.end, x, out=x)
+            np.multiply(self.a, r, out=xd)
             xdd[:] = self.minus_a
 
 

@@ -52,13 +52,11 @@ class ComputedTorque:
         The command u = ((qdd_ref + kd e') + kp e) + ki z is computed in floats, element by element
         (n values: see :mod:`~robofmu.components.floats`)."""
         kp, kd, ki = self.kp, self.kd, self.ki
-        if ki != 0.0:
-            self._write_command([a + (b - c) * kd + (d - e) * kp + z * ki for a, b, c, d, e, z in
-                                 zip(qdd_ref.tolist(), qd_ref.tolist(), qd.tolist(), q_ref.tolist(), q.tolist(),
-                                     self.z.tolist())])
-        else:                                        # PD: u + 0 z is u
-            self._write_command([a + (b - c) * kd + (d - e) * kp for a, b, c, d, e in
-                                 zip(qdd_ref.tolist(), qd_ref.tolist(), qd.tolist(), q_ref.tolist(), q.tolist())])
+        u = [a + (b - c) * kd + (d - e) * kp for a, b, c, d, e in
+             zip(qdd_ref.tolist(), qd_ref.tolist(), qd.tolist(), q_ref.tolist(), q.tolist())]
+        if ki != 0.0:                                # PD: u + 0 z is u
+            u = [v + z * ki for v, z in zip(u, self.z.tolist())]
+        self._write_command(u)
         self.robot.inverse_dynamics_into(q, qd, self._command, out)    # M(q) u + N(q, qd) in one pass (RNEA)
 
     def advance(self, q_ref, q, h: float) -> None:

@@ -113,3 +113,24 @@ def test_parquet_follows_the_rows_as_they_arrive(tmp_path, monkeypatch):
         table = pq.read_table(tmp_path / "sweep.parquet").to_pydict()
         assert table["a.x"] == [j / 10 for j in range(k + 1)] and table["m"] == [j / 3 for j in range(k + 1)]
     assert not (tmp_path / "sweep.parquet.tmp").exists()
+
+
+def test_ctrl_c_during_the_fsync_keeps_the_row_already_visible(tmp_path, monkeypatch):
+    """The line is flushed (a reader sees it) before the fsync returns; a Ctrl-C raised there must
+    not let :meth:`Journal.finish`, which rewrites the file from memory, drop it."""
+    from robofmu.system.sweep import journal as module
+
+    journal = Journal(tmp_path, ["a.x"], ["m"])
+    journal.append({"a.x": 0.1, "m": 1.0, "wall_time": 1.0, "status": "ok", "message": ""})
+
+    def interrupted(descriptor):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(module.os, "fsync", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        journal.append({"a.x": 0.2, "m": 2.0, "wall_time": 1.0, "status": "ok", "message": ""})
+    monkeypatch.undo()
+    rows = journal.finish([(cell(0.1),), (cell(0.2),)])
+    assert [r["m"] for r in rows] == [cell(1.0), cell(2.0)]
+    with (tmp_path / "sweep.csv").open() as f:
+        assert f.read().splitlines()[1:] == ["0.1,1.0,1.0,ok,", "0.2,2.0,1.0,ok,"]

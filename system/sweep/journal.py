@@ -92,8 +92,14 @@ class Journal:
         return len(failed)
 
     def append(self, record: dict) -> dict[str, str]:
-        """Write one run's record (missing metrics empty) and flush it to disk."""
+        """Write one run's record (missing metrics empty) and flush it to disk.
+
+        The row is kept in memory before it is written: a Ctrl-C that lands while the write or
+        the fsync is under way (the line may already be visible to readers) cannot leave a row
+        on disk that :meth:`finish`, which rewrites the file from memory, would drop.
+        """
         row = {c: cell(record.get(c)) for c in self.columns}
+        self.rows[tuple(row[n] for n in self.names)] = row
         if self._file is None:
             new = not self.path.is_file() or self.path.stat().st_size == 0
             self._file = self.path.open("a", newline="")
@@ -103,7 +109,6 @@ class Journal:
         self._writer.writerow([row[c] for c in self.columns])
         self._file.flush()
         os.fsync(self._file.fileno())
-        self.rows[tuple(row[n] for n in self.names)] = row
         if time.monotonic() - self._parquet_at >= PARQUET_EVERY:
             self.write_parquet(list(self.rows.values()))
         return row

@@ -147,6 +147,26 @@ def _ssp(args) -> int:
     return 0
 
 
+def _container(args) -> int:
+    from robofmu.system.container import export_container
+    from robofmu.system.experiment import load
+    from robofmu.system.runner import check_fmu_folder, check_writable
+
+    try:
+        system = load(args.experiment, fmu_dir=args.fmus)
+        out = Path(args.out or f"{system.name}.fmu")
+        check_writable(out, "--out" if args.out else "the default output", file=True)
+        check_fmu_folder(system)
+        written = export_container(system, out, algorithm=args.algorithm)
+    except ValueError as exc:          # UsageError, ExperimentError, DiagramError, the toolbox's refusal
+        return _stopped("container", exc)
+    except OSError as exc:
+        _say("container", f"cannot write {out}: {exc.strerror or exc}")
+        return 1
+    print(written)
+    return 0
+
+
 def _demo(args) -> int:
     from robofmu.system.demo import demo
     from robofmu.system.master import Interrupted, SimulationError
@@ -212,7 +232,7 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
 
     p = sub.add_parser("build", help="build the block FMUs of robots into DIR/<robot>/<block>.fmu",
                        description="Build FMI 2.0 co-simulation FMUs (pythonfmu) for each robot "
-                                   "and validate them with fmpy.")
+                                   "and validate them with fmpy and fmu-manipulation-toolbox's checker.")
     p.add_argument("robots", nargs="*", metavar="ROBOT", help="robots to build (default: all described)")
     p.add_argument("--out", default="fmus", metavar="DIR", help="output folder (default: fmus)")
     p.set_defaults(func=_build)
@@ -280,6 +300,22 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.add_argument("--inline", action="store_true", help="parameter sets inline in the SSD, not .ssv files")
     p.set_defaults(func=_ssp)
+
+    p = sub.add_parser("container", help="an experiment's whole diagram as one FMU (an FMU container)",
+                       description="Package the experiment's block FMUs, wires and parameters as one FMI 2.0 "
+                                   "co-simulation FMU (fmu-manipulation-toolbox's FMU container) that any FMI "
+                                   "tool runs as a single block. It steps the blocks at the experiment's step "
+                                   "and reproduces the master's run bit for bit: Gauss-Seidel (sequential "
+                                   "mode, blocks without feedthrough first) or Jacobi (parallel mode). The "
+                                   "diagram's unwired inputs are its inputs (the experiment's values as start "
+                                   "values), its unwired outputs its outputs, the wired signals its locals, "
+                                   "all named BLOCK.VARIABLE.")
+    p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
+    p.add_argument("--out", metavar="FILE", help="output file (default: EXPERIMENT.fmu)")
+    p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
+    p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"],
+                   help="the master algorithm to reproduce (default: the experiment's)")
+    p.set_defaults(func=_container)
 
     if _command(argv) == "step":
         from robofmu.system.stepresponse import add_step_command

@@ -1,4 +1,4 @@
-"""Export a diagram as an SSP 1.0 package, and run such a package with fmpy.ssp and libcosim.
+"""Export a diagram as an SSP 1.0 package, and run such a package with fmpy.ssp, libcosim and ecos.
 
 :func:`export_ssp` writes ``<name>.ssp``: a zip holding ``SystemStructure.ssd`` and, under
 ``resources/``, every FMU of the diagram and one SSV parameter set per block with parameters::
@@ -14,7 +14,8 @@ The SSD declares, per component, a connector for every output and every wired in
 and ``ssd:DefaultExperiment`` with the start and stop time, annotated (OSP annotation
 ``com.opensimulationplatform``) with a fixed-step algorithm of the diagram's step. Parameters are
 bound per component (``ssd:ParameterBinding source="resources/<block>.ssv"``; ``inline=True``
-puts the ``ssv:ParameterSet`` into the SSD instead). Vector parameters (``q0 = [..]``) are
+puts the ``ssv:ParameterSet`` into the SSD instead); every set carries the system's name, so that a
+tool applying one set by name (ecos) applies them all. Vector parameters (``q0 = [..]``) are
 expanded to ``q0[1]`` .. ``q0[n]``. Namespace prefixes are exactly ``ssd``, ``ssc``, ``ssv``:
 libcosim reads the SSD with boost::property_tree, which matches prefixed names literally.
 
@@ -122,7 +123,7 @@ def _fmt_real(value: float) -> str:
     return repr(value)
 
 
-def _parameter_values(block: str, variables: dict, parameters: dict) -> list[tuple[str, str, str]]:
+def parameter_values(block: str, variables: dict, parameters: dict) -> list[tuple[str, str, str]]:
     """(scalar name, SSV type, value text) of a block's parameters, vector bases expanded."""
     out = []
     for base, value in parameters.items():
@@ -220,10 +221,10 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
             ET.SubElement(con, _q(f"ssc:{kind}"), attrs)
         for u in node.model_description.unitDefinitions:
             units.setdefault(u.name, u)
-        values = _parameter_values(spec.name, node.variables, spec.parameters)
+        values = parameter_values(spec.name, node.variables, spec.parameters)
         if values:
             bindings = ET.SubElement(comp, _q("ssd:ParameterBindings"))
-            set_name = f"{system.name}.{spec.name}"
+            set_name = system.name          # one named set over the components (ecos applies sets by name)
             if inline:
                 binding = ET.SubElement(bindings, _q("ssd:ParameterBinding"),
                                         {"type": "application/x-ssp-parameter-set"})
@@ -388,6 +389,70 @@ def run_ssp_libcosim(path: str | Path, stop_time: float, step: float, start_time
                        "wall_time": wall})
     finally:
         run.close()
+
+
+def load_ecospy():
+    """ecospy, its library loaded. Its wheel's libecosc.so needs oneTBB's libtbb.so.12, which it
+    does not ship: the ``tbb`` wheel (dev extra) puts one in this environment's lib folder, loaded
+    here first (globally) so that the dynamic loader finds it by its soname."""
+    import ctypes
+    import sys
+
+    for folder in {sys.prefix, sys.base_prefix}:
+        tbb = Path(folder) / "lib" / "libtbb.so.12"
+        if tbb.is_file():
+            ctypes.CDLL(str(tbb), mode=ctypes.RTLD_GLOBAL)
+            break
+    import ecospy
+
+    return ecospy
+
+
+def run_ssp_ecos(path: str | Path, stop_time: float, step: float, start_time: float = 0.0,
+                 record: list[str] | None = None) -> Result:
+    """Simulate an SSP with ecos (``ecospy``), the Ecos platform's co-simulation engine.
+
+    ecos loads the package itself (FMUs, connections, the parameter sets of the SSV files; they
+    all carry the system's name, which :func:`export_ssp` gives them, and that set is applied at
+    initialization). Its fixed-step algorithm is libcosim's Jacobi exchange, and its
+    initialization passes connected values along as often as there are components (consistent
+    at t0), so the states (the plant's q, qd) equal the master's Jacobi run to rounding.
+
+    What it records differs for a feedthrough block: after every step ecos transfers the
+    outputs, sets the inputs and reads every output again, so :meth:`get_real` returns a
+    feedthrough block's outputs computed from its inputs of t + h, where the master's Jacobi
+    run records those of its step (from its inputs of t): the master's value one row later.
+
+    Returns a :class:`~robofmu.system.result.Result` with the Real outputs matching ``record``
+    (fnmatch patterns on ``instance.variable``; default all) at t0, t0 + h, .., t0 + n h.
+    """
+    from .libcosim import guard_pythonfmu_exit       # ctypes only: libcosimpy is not needed
+
+    ecospy = load_ecospy()
+    guard_pythonfmu_exit()
+    path = Path(path)
+    n = step_count(start_time, stop_time, step)
+    system = ET.fromstring(ssd_text(path)).find("ssd:System", NS)
+    columns = [f"{comp.get('name')}.{con.get('name')}" for comp in system.iterfind("ssd:Elements/ssd:Component", NS)
+               for con in comp.iterfind("ssd:Connectors/ssd:Connector", NS)
+               if con.get("kind") == "output" and con.find("ssc:Real", NS) is not None]
+    keep = [columns[k] for k in select(columns, record)]
+    identifiers = [c.replace(".", "::", 1) for c in keep]
+    ecospy.EcosLib.set_log_level("warn")
+    data = np.empty((n + 1, len(keep)))
+    times = np.empty(n + 1)
+    with ecospy.EcosSimulation(step_size=step, ssp_path=str(path)) as sim:
+        sim.init(start_time, parameter_set=system.get("name"))
+        get = sim.get_real
+        times[0], data[0] = sim.get_time(), [get(i) for i in identifiers]
+        wall = _time.perf_counter()
+        for k in range(1, n + 1):
+            sim.step()
+            times[k], data[k] = sim.get_time(), [get(i) for i in identifiers]
+        wall = _time.perf_counter() - wall
+        sim.terminate()
+    return Result(times, keep, data, {"tool": "ecos", "algorithm": "jacobi (ecos fixed-step)", "step": step,
+                                      "wall_time": wall})
 
 
 def ssd_text(path: str | Path) -> str:

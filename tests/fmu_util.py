@@ -46,6 +46,20 @@ def robot_blocks(kinds=None, robots=None) -> list:
     return params
 
 
+#: One computed-torque PD experiment per robot (its flagship loop): for the tests that run every
+#: robot's whole diagram in another FMI tool (a PD loop has no state in its feedthrough blocks).
+PD_EXPERIMENTS = {"chess": "chess-pd", "rrp": "rrp-line", "rpp": "rpp-bangbang", "planar2r": "planar2r-nr",
+                  "rrp_offset": "rrp_offset-nr", "3rrp": "3rrp-circle"}
+
+
+def robot_experiments() -> list:
+    """``pytest.param(experiment, id=robot)``: :data:`PD_EXPERIMENTS`, which must name an
+    experiment of every described robot."""
+    missing = sorted(set(available()) - set(PD_EXPERIMENTS))
+    assert not missing, f"PD_EXPERIMENTS names no experiment of {missing}"
+    return [pytest.param(PD_EXPERIMENTS[robot], id=robot) for robot in available()]
+
+
 class Loop:
     """The diagram of an experiment, exchanged and stepped by hand like the master does.
 

@@ -1,6 +1,7 @@
 """The FMU contract, for every block of every described robot (test ids ``<robot>-<block>``).
 
-What every FMU promises (docs/design.md, the public interfaces): it passes ``fmpy validate``;
+What every FMU promises (docs/design.md, the public interfaces): it passes ``fmpy validate`` and
+fmu-manipulation-toolbox's ``fmutool -check``;
 every variable has a description, Reals an SI unit defined in UnitDefinitions; the model
 structure declares each output's real dependencies (what the FMI-free block declares: the
 feedthrough blocks on their inputs, plant and trajectory on none; the plant's q[i] on q0[i] at
@@ -32,6 +33,7 @@ from robofmu.components.blocks import make_block
 from robofmu.components.blocks.text import parse_matrix, parse_vector
 from robofmu.components.robots import available, load_description, load_model
 from robofmu.system.fmu import Block, FMUError
+from robofmu.system.validate import checker_problems, problems_of
 
 from fmu_util import open_block, robot_blocks
 
@@ -106,6 +108,33 @@ def test_model_identifiers_are_unique_across_the_collection(fmu_root):
 @pytest.mark.parametrize("robot, block", ALL)
 def test_fmpy_validate_reports_no_problem(fmu_root, robot, block):
     assert validate_fmu(str(fmu(fmu_root, robot, block))) == []
+
+
+@pytest.mark.parametrize("robot, block", ALL)
+def test_fmu_manipulation_toolbox_check_reports_no_problem(fmu_root, robot, block):
+    """``fmutool -check``'s checkers: the FMI 2.0 XSD schema, then the rules it cannot express."""
+    assert checker_problems(fmu(fmu_root, robot, block)) == []
+
+
+def test_both_checkers_can_fail(fmu_root, tmp_path):
+    """A copy of a plant whose output q[1] claims variability="fixed" (an output cannot be fixed)
+    and whose qd[1] is renamed q[1]: each checker names both faults."""
+    broken = tmp_path / "plant.fmu"
+    with zipfile.ZipFile(fmu(fmu_root, "chess", "plant")) as source, zipfile.ZipFile(broken, "w") as copy:
+        for item in source.infolist():
+            data = source.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                text = data.decode()
+                q1 = text.index('name="q[1]"')
+                text = text[:q1] + text[q1:].replace('variability="continuous"', 'variability="fixed"', 1)
+                data = text.replace('name="qd[1]"', 'name="q[1]"').encode()
+            copy.writestr(item, data)
+    toolbox = checker_problems(broken)
+    assert any("'q[1]': causality='output' and variability='fixed'" in p for p in toolbox), toolbox
+    assert any("'q[1]' is used by several variables" in p for p in toolbox), toolbox
+    found = problems_of(broken)
+    assert any(p.startswith("fmpy: ") and 'variability="fixed"' in p for p in found), found
+    assert any(p.startswith("fmpy: ") and "is not unique" in p for p in found), found
 
 
 @pytest.mark.parametrize("robot, block", ALL)

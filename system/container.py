@@ -1,0 +1,203 @@
+"""A whole diagram as one FMU: an FMU container (fmu-manipulation-toolbox) of the blocks' FMUs.
+
+:func:`export_container` packages an experiment's diagram into a single FMI 2.0 co-simulation
+FMU that any importer can run as one block (a Simulink FMU block, fmpy, libcosim, ...): the
+container's own binary (``container.so`` of `fmu-manipulation-toolbox
+<https://github.com/grouperenault/fmu_manipulation_toolbox>`_) instantiates the embedded block
+FMUs, sets the experiment's parameters as their start values, passes the wired values between
+them at every step of its internal fixed step (the experiment's communication step) and steps
+them. Wires become the container's local variables, unwired outputs its outputs; both are
+named ``instance.variable`` as in the master's results (``plant.q[2]``, ``ik.reachable``).
+
+How it schedules the blocks (measured equal to the master's runs bit for bit, every recorded
+output, on every robot: tests/test_container.py):
+
+``algorithm="jacobi"``
+    The container's parallel mode: every block steps from t with the values wired at t, then the
+    wired values are passed on. A feedthrough block's output at t + h comes from its inputs at t:
+    the master's Jacobi exchange.
+``algorithm="gauss-seidel"``
+    The container's sequential mode, with the blocks in this order: first every block without
+    direct feedthrough (the plant, the trajectory: their outputs at t + h do not depend on their
+    inputs at t + h), then the feedthrough blocks in the diagram's evaluation order. Each block
+    gets the values its sources have just produced. Within a step from t the plant steps with
+    the torque computed at t; the feedthrough blocks (ik, controller) then step with their
+    inputs at t + h, so that their outputs, read after the step, are the master's Gauss-Seidel
+    values at t + h. A feedthrough block with a state of its own (the PID's integral) advances it
+    over [t, t + h] with its inputs at t + h, not at t: there the two runs differ by a term of
+    first order in h (ki h |de|); a PD loop is reproduced bit for bit.
+
+In both modes the container initializes the blocks in that order, each with the initial outputs
+of the blocks feeding it, so the loop starts consistent at t0, as the master's does.
+
+The embedded FMUs are robofmu's pythonfmu FMUs, so the process that runs the container needs
+what ``robofmu doctor`` lists (in a non-Python host: libpython preloaded, the venv on PATH).
+"""
+from __future__ import annotations
+
+import logging
+import re
+import shutil
+import tempfile
+import time as _time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from .check import Plan, plan, step_count
+from .diagram import System, select
+from .result import Result
+from .ssp import parameter_values
+
+__all__ = ["ALGORITHMS", "container_order", "export_container", "model_identifier", "run_container"]
+
+#: The master's algorithms a container can reproduce.
+ALGORITHMS = ("gauss-seidel", "jacobi")
+
+
+def container_order(planned: Plan) -> list[str]:
+    """The instance names in the order the container initializes and (sequential mode) steps
+    them: the blocks without direct feedthrough first, then the others in evaluation order."""
+    stateful = [b for b in planned.order if not any(planned.nodes[b].feedthrough.values())]
+    return stateful + [b for b in planned.order if b not in stateful]
+
+
+def model_identifier(path: Path) -> str:
+    """The container's model identifier: its file's stem as a C identifier (``3rrp-circle.fmu``:
+    ``_3rrp_circle``), the prefix of its binary's FMI functions."""
+    return re.sub(r"\W|^(?=\d)", "_", Path(path).stem)
+
+
+@contextmanager
+def _quiet_toolbox():
+    """fmu-manipulation-toolbox logs every build step, and warns of what is meant here (inputs
+    left unwired keep their start values; the loop through the controller): keep its errors."""
+    logger = logging.getLogger("fmu_manipulation_toolbox")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def export_container(system: System, path: str | Path, algorithm: str | None = None) -> Path:
+    """Write ``system``'s diagram as one FMU container at ``path``; returns the path.
+
+    The diagram is planned first as the master plans it (FMUs valid, wires typed and matching,
+    no algebraic loop): a diagram the master refuses is not packaged (DiagramError).
+
+    Parameters
+    ----------
+    system : System
+        E.g. ``experiment.load("chess-pd", fmu_dir="fmus")``.
+    path : str or Path
+        The ``.fmu`` file to write (parent folders are created). Its stem gives the
+        container's model identifier (:func:`model_identifier`).
+    algorithm : {"gauss-seidel", "jacobi"}, optional
+        The master algorithm the container reproduces (default: the experiment's).
+
+    Raises
+    ------
+    ValueError
+        An unknown algorithm, a diagram the master refuses (DiagramError), or a parameter the
+        container cannot take (fmu-manipulation-toolbox's message).
+    """
+    from fmu_manipulation_toolbox.container import FMUContainer, FMUContainerError
+
+    algorithm = algorithm or system.algorithm
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm {algorithm!r}: one of {', '.join(ALGORITHMS)}")
+    path = Path(path)
+    planned = plan(system)
+    fmu_name = {b: f"{b}.fmu" for b in container_order(planned)}   # the container names a block by a file name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".container-", dir=path.parent) as folder, _quiet_toolbox():
+        try:
+            container = FMUContainer(model_identifier(path), folder)
+            container.start_time, container.stop_time = 0.0, system.stop_time
+            for block, name in fmu_name.items():
+                container.get_fmu(str(planned.nodes[block].path.resolve()), name)
+            for link in planned.links:
+                container.add_link(fmu_name[link.source], link.output, fmu_name[link.target], link.input)
+            sources = {(link.source, link.output) for link in planned.links}
+            targets = {(link.target, link.input) for link in planned.links}
+            for block, name in fmu_name.items():
+                node = planned.nodes[block]
+                for v in node.model_description.modelVariables:          # a wired output is a local
+                    if v.causality == "output" and (block, v.name) not in sources:
+                        container.add_output(name, v.name, f"{block}.{v.name}")
+                    elif v.causality == "input" and (block, v.name) not in targets:
+                        container.add_input(f"{block}.{v.name}", name, v.name)
+                for variable, _, text in parameter_values(block, node.variables, node.spec.parameters):
+                    container.add_start_value(name, variable, text)
+            container.make_fmu(path.name, system.step, sequential=algorithm == "gauss-seidel")
+        except FMUContainerError as exc:
+            raise ValueError(f"{system.name}: fmu-manipulation-toolbox cannot build the container: "
+                             f"{getattr(exc, 'reason', exc)}") from None
+        shutil.move(Path(folder) / path.name, path)
+    return path
+
+
+def run_container(path: str | Path, stop_time: float, step: float | None = None, start_time: float = 0.0,
+                  record: list[str] | None = None) -> Result:
+    """Simulate a container FMU with fmpy, recording its outputs and locals at every step.
+
+    Parameters
+    ----------
+    path : str or Path
+        A container written by :func:`export_container`.
+    stop_time : float
+        s, a whole number of steps after ``start_time``.
+    step : float, optional
+        Communication step (s); default: the container's internal step.
+    start_time : float
+        s.
+    record : list of str, optional
+        ``instance.variable`` names, vector bases or fnmatch patterns (default: every Real and
+        Boolean output and local; Booleans as 0/1).
+
+    Returns
+    -------
+    Result
+        Rows at t0, t0 + h, ..., t0 + n h; ``info["messages"]`` holds what the container and
+        its FMUs logged.
+
+    Raises
+    ------
+    RuntimeError
+        The container failed (an FMU refused a step or its initialization): fmpy's error and
+        the last messages logged, which name the block, variable and time.
+    """
+    from fmpy import read_model_description, simulate_fmu
+
+    from .libcosim import guard_pythonfmu_exit       # ctypes only: libcosimpy is not needed
+
+    guard_pythonfmu_exit()
+    md = read_model_description(str(path))
+    step = step if step is not None else float(md.defaultExperiment.stepSize)
+    n = step_count(start_time, stop_time, step)
+    signals = [v.name for v in md.modelVariables
+               if v.type in ("Real", "Boolean") and v.causality in ("output", "local")]
+    keep = [signals[k] for k in select(signals, record)]
+    messages = []
+
+    def log(component, instance, status, category, message):
+        messages.append(message.decode(errors="replace"))
+
+    wall = _time.perf_counter()
+    try:
+        rows = simulate_fmu(str(path), start_time=start_time, stop_time=start_time + n * step, step_size=step,
+                            output_interval=step, output=keep, logger=log)
+    except Exception as exc:                 # fmpy raises a bare Exception for a failed FMI call
+        blocks = [m for m in messages if ".fmu: " in m]       # an embedded FMU's, not the container's chatter
+        said = "; ".join((blocks or messages)[-3:])
+        raise RuntimeError(f"{Path(path).name}: {exc}" + (f"; the FMUs said: {said}" if said else "")) from None
+    wall = _time.perf_counter() - wall
+    if len(rows) != n + 1:
+        raise RuntimeError(f"fmpy recorded {len(rows)} rows of {Path(path).name}, expected {n + 1}")
+    data = np.column_stack([rows[c].astype(float) for c in keep]) if keep else np.zeros((n + 1, 0))
+    return Result(start_time + step * np.arange(n + 1), keep, data,
+                  {"tool": "fmpy", "container": Path(path).name, "step": step, "wall_time": wall,
+                   "messages": messages})

@@ -1,0 +1,166 @@
+"""Every robot's whole diagram as one FMU container (fmu-manipulation-toolbox), run by fmpy.
+
+The container must reproduce the master bit for bit: in parallel mode its Jacobi run, in
+sequential mode (blocks without feedthrough first) its Gauss-Seidel run, every recorded output
+of every block, on one PD experiment per robot. The exceptions are exact and tested as such:
+the Newton-Raphson IK's ``iterations`` in sequential mode (its outputs are asked for again after
+its step, with the same inputs: a second solve from the converged solution, 0 iterations) and a
+PID's integral (advanced with the inputs of t + h: a difference of first order in h).
+"""
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+
+pytest.importorskip("fmu_manipulation_toolbox", reason="fmu-manipulation-toolbox is not installed")
+
+from fmpy import read_model_description  # noqa: E402
+from fmpy.validation import validate_fmu  # noqa: E402
+
+from fmu_util import robot_experiments  # noqa: E402
+from robofmu.system import experiment  # noqa: E402
+from robofmu.system.check import plan  # noqa: E402
+from robofmu.system.container import container_order, export_container, model_identifier, run_container  # noqa: E402
+from robofmu.system.master import Master  # noqa: E402
+
+STOP = 0.5              # s
+ALGORITHMS = ["gauss-seidel", "jacobi"]
+CLI = [sys.executable, "-m", "robofmu.system.cli"]
+
+
+@pytest.fixture(scope="module")
+def containers(fmu_root, tmp_path_factory):
+    """containers(name, algorithm) -> (System, container path), each built once."""
+    folder, cache = tmp_path_factory.mktemp("containers"), {}
+
+    def get(name, algorithm):
+        if (name, algorithm) not in cache:
+            system = experiment.load(name, fmu_dir=fmu_root)
+            cache[name, algorithm] = system, export_container(system, folder / f"{name}-{algorithm}.fmu", algorithm)
+        return cache[name, algorithm]
+
+    return get
+
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+@pytest.mark.parametrize("name", robot_experiments())
+def test_the_container_reproduces_the_master_bit_for_bit(containers, name, algorithm):
+    system, path = containers(name, algorithm)
+    h = system.step
+    boxed = run_container(path, STOP, h)
+    master = Master(system).run(STOP, h, algorithm)
+    assert sorted(boxed.columns) == sorted(master.columns)          # every output, Booleans included
+    np.testing.assert_array_equal(boxed.time, master.time)
+    for column in master.columns:
+        if column == "ik.iterations" and algorithm == "gauss-seidel":
+            assert np.all(boxed[column][1:] == 0.0) and np.max(master[column]) > 0
+            continue
+        np.testing.assert_array_equal(boxed[column], master[column], err_msg=column)
+    # not vacuous: the two algorithms give different runs
+    other = Master(system).run(STOP, h, ALGORITHMS[1 - ALGORITHMS.index(algorithm)])
+    assert np.max(np.abs(other.vector("plant.q") - master.vector("plant.q"))) > 1e-9
+
+
+def test_a_pid_integral_differs_at_first_order_in_sequential_mode(fmu_root, tmp_path):
+    """The PID's integral advances over [t, t + h] with the error at t + h in the container, at t in
+    the master: the torques differ by about ki h |e(t + h) - e(t)| summed, which halves with h."""
+    system = experiment.load("chess-pid-unknown-pawn", fmu_dir=fmu_root)
+    differences = []
+    for h in (2e-3, 1e-3):
+        system.step = h
+        path = export_container(system, tmp_path / f"pid-{h:g}.fmu", "gauss-seidel")
+        boxed, master = run_container(path, STOP, h), Master(system).run(STOP, h, "gauss-seidel")
+        np.testing.assert_array_equal(boxed.vector("ik.q_ref"), master.vector("ik.q_ref"))  # upstream: equal
+        differences.append(np.max(np.abs(boxed.vector("controller.tau") - master.vector("controller.tau"))))
+    assert 0 < differences[1] < 1e-5
+    assert 0.4 < differences[1] / differences[0] < 0.6, differences
+
+
+@pytest.mark.parametrize("name", robot_experiments())
+def test_the_container_is_a_valid_block_with_the_diagram_open_ends_as_ports(containers, name):
+    """fmpy validates it; its inputs are the diagram's unwired inputs (with the experiment's values
+    as start values), its outputs the unwired outputs, its locals the wired ones."""
+    system, path = containers(name, "gauss-seidel")
+    assert validate_fmu(str(path)) == []
+    md = read_model_description(str(path))
+    planned = plan(system)
+    sources = {(link.source, link.output) for link in planned.links}
+    targets = {(link.target, link.input) for link in planned.links}
+    expected = {"input": set(), "output": set(), "local": set()}
+    for block, node in planned.nodes.items():
+        for v in node.model_description.modelVariables:
+            if v.causality == "input" and (block, v.name) not in targets:
+                expected["input"].add(f"{block}.{v.name}")
+            elif v.causality == "output":
+                expected["local" if (block, v.name) in sources else "output"].add(f"{block}.{v.name}")
+    found = {c: {v.name for v in md.modelVariables if v.causality == c} for c in expected}
+    assert found == expected
+    assert md.coSimulation.modelIdentifier == model_identifier(path)
+    assert re.fullmatch(r"[A-Za-z_]\w*", model_identifier(path))          # a C identifier, whatever the name
+    assert float(md.defaultExperiment.stepSize) == system.step
+    assert float(md.defaultExperiment.stopTime) == system.stop_time
+    for spec in system.blocks:                         # an input the experiment sets starts there
+        for parameter, value in spec.parameters.items():
+            for v in md.modelVariables:
+                if v.causality == "input" and v.name.split("[")[0] == f"{spec.name}.{parameter}":
+                    index = int(v.name[v.name.index("[") + 1:-1]) - 1 if "[" in v.name else None
+                    assert float(v.start) == (value[index] if index is not None else value)
+    with zipfile.ZipFile(path) as zf:                  # every block's FMU inside, Linux binary included
+        names = zf.namelist()
+    assert sum(n.endswith("/modelDescription.xml") for n in names) == len(system.blocks)
+    assert f"binaries/linux64/{md.coSimulation.modelIdentifier}.so" in names
+
+
+def test_model_identifier_is_the_file_stem_as_a_c_identifier():
+    assert model_identifier("out/chess-pd.fmu") == "chess_pd"
+    assert model_identifier("3rrp-circle.fmu") == "_3rrp_circle"
+
+
+def test_sequential_order_puts_the_blocks_without_feedthrough_first(fmu_root):
+    planned = plan(experiment.load("chess-pd", fmu_dir=fmu_root))
+    assert container_order(planned) == ["trajectory", "plant", "ik", "controller"]
+
+
+def test_two_runs_of_one_container_in_one_process_are_identical(containers):
+    _, path = containers("chess-pd", "jacobi")
+    first, second = run_container(path, 0.1), run_container(path, 0.1)
+    np.testing.assert_array_equal(first.data, second.data)
+
+
+def test_a_failing_block_stops_the_container_with_its_message(fmu_root, tmp_path):
+    """A block that refuses its initialization (kp < 0) fails the container's, and what the
+    controller logged reaches the caller."""
+    system = experiment.load("chess-pd", fmu_dir=fmu_root)
+    controller = next(b for b in system.blocks if b.name == "controller")
+    controller.parameters["kp"] = -1.0
+    path = export_container(system, tmp_path / "bad.fmu")
+    with pytest.raises(RuntimeError, match=r"bad\.fmu: .*kp"):
+        run_container(path, 0.01)
+
+
+def test_unknown_algorithm_is_refused(fmu_root, tmp_path):
+    system = experiment.load("chess-pd", fmu_dir=fmu_root)
+    with pytest.raises(ValueError, match="algorithm 'rk4': one of gauss-seidel, jacobi"):
+        export_container(system, tmp_path / "x.fmu", "rk4")
+    assert not (tmp_path / "x.fmu").exists()
+
+
+def test_the_command_writes_a_container_and_answers_mistakes_in_one_line(fmu_root, tmp_path):
+    done = subprocess.run([*CLI, "container", "rrp-line", "--fmus", str(fmu_root), "--out", str(tmp_path / "rrp.fmu"),
+                           "--algorithm", "jacobi"], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(tmp_path / "rrp.fmu") and (tmp_path / "rrp.fmu").is_file()
+    assert validate_fmu(str(tmp_path / "rrp.fmu")) == []
+    for args, message in ((["no-such-experiment"], "robofmu container: "),
+                          (["rrp-line", "--fmus", str(tmp_path / "none")], "--fmus"),
+                          (["rrp-line", "--fmus", str(fmu_root), "--out", str(tmp_path / "rrp.fmu" / "x.fmu")],
+                           "--out")):
+        failed = subprocess.run([*CLI, "container", *args], capture_output=True, text=True, cwd=tmp_path)
+        assert failed.returncode == 2, failed.stderr
+        assert failed.stderr.startswith("robofmu container: ") and message in failed.stderr
+        assert len(failed.stderr.strip().splitlines()) == 1 and "Traceback" not in failed.stderr

@@ -1,0 +1,89 @@
+"""Every robot's exported SSP package run by ecos (the Ecos platform's co-simulation engine, through
+ecospy), against the master's Jacobi run.
+
+ecos steps every component from t with the values transferred at t, then transfers the outputs:
+the master's Jacobi exchange; its initialization passes connected values along once per
+component, so the loop starts consistent. Hence, on one PD experiment per robot:
+
+- the blocks without direct feedthrough (trajectory, plant) record what the master records, to
+  rounding (ecos accumulates its time, t += h; the master computes k h);
+- a feedthrough block (ik, controller, fk, jacobian) records, in ecos, its outputs for the inputs
+  transferred after the step (ecos sets them and reads every output again), i.e. the master's
+  value one row later. The Newton-Raphson IK's ``iterations`` is left out there: the solve ecos
+  asks for is another solve than the master's (the same solution, another iteration count).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fmu_util import robot_experiments
+from robofmu.system import experiment
+from robofmu.system.check import plan
+from robofmu.system.master import Master
+from robofmu.system.ssp import export_ssp, load_ecospy, run_ssp_ecos
+
+try:
+    load_ecospy()
+except (ImportError, OSError) as exc:          # OSError: its library or libtbb.so.12 cannot be loaded
+    pytest.skip(f"ecospy (dev extra) cannot be loaded: {exc}", allow_module_level=True)
+
+STOP = 0.5                  # s
+
+
+@pytest.fixture(scope="module")
+def packages(fmu_root, tmp_path_factory):
+    """packages(name) -> (System, its .ssp), exported once."""
+    folder, cache = tmp_path_factory.mktemp("ecos"), {}
+
+    def get(name):
+        if name not in cache:
+            system = experiment.load(name, fmu_dir=fmu_root)
+            cache[name] = system, export_ssp(system, folder / f"{name}.ssp")
+        return cache[name]
+
+    return get
+
+
+@pytest.mark.parametrize("name", robot_experiments())
+def test_ecos_reproduces_the_master_in_jacobi_mode(packages, name):
+    system, path = packages(name)
+    h = system.step
+    ecos = run_ssp_ecos(path, STOP, h)
+    jacobi = Master(system).run(STOP, h, "jacobi")
+    np.testing.assert_allclose(ecos.time, jacobi.time, rtol=0, atol=1e-12)
+    real = [c for c in jacobi.columns if not c.endswith(("grip", "reachable"))]       # the Booleans
+    assert sorted(ecos.columns) == sorted(real)
+    planned = plan(system)
+    feedthrough = {b for b, node in planned.nodes.items() if any(node.feedthrough.values())}
+    assert {"ik", "controller"} & feedthrough and "plant" not in feedthrough
+    for column in ecos.columns:
+        block = column.split(".", 1)[0]
+        scale = max(1.0, np.max(np.abs(jacobi[column])))
+        if block not in feedthrough:
+            np.testing.assert_allclose(ecos[column], jacobi[column], rtol=0, atol=1e-12 * scale, err_msg=column)
+        elif not column.endswith(".iterations"):
+            np.testing.assert_allclose(ecos[column][:-1], jacobi[column][1:], rtol=0, atol=1e-12 * scale,
+                                       err_msg=column)
+    # not vacuous: the master's Gauss-Seidel run is another run
+    gauss_seidel = Master(system).run(STOP, h, "gauss-seidel")
+    assert np.max(np.abs(gauss_seidel.vector("plant.q") - jacobi.vector("plant.q"))) > 1e-9
+
+
+def test_ecos_applies_the_packages_parameter_set(packages, fmu_root, tmp_path):
+    """A package whose controller gains differ from the experiment's: ecos's run follows them, so
+    the SSV set (named after the system) is applied at initialization."""
+    system, _ = packages("rrp-line")
+    controller = next(b for b in system.blocks if b.name == "controller")
+    softer = experiment.with_parameters(system, {"controller.kp": controller.parameters.get("kp", 400.0) / 4})
+    path = export_ssp(softer, tmp_path / "softer.ssp")
+    ecos = run_ssp_ecos(path, STOP, system.step)
+    np.testing.assert_allclose(ecos.vector("plant.q"), Master(softer).run(STOP, system.step, "jacobi").vector("plant.q"),
+                               rtol=0, atol=1e-12)
+    assert np.max(np.abs(ecos.vector("plant.q") - Master(system).run(STOP, system.step, "jacobi").vector("plant.q"))) > 1e-9
+
+
+def test_two_ecos_runs_in_one_process_are_identical(packages):
+    _, path = packages("chess-pd")
+    first, second = run_ssp_ecos(path, 0.1, 1e-3), run_ssp_ecos(path, 0.1, 1e-3)
+    np.testing.assert_array_equal(first.data, second.data)

@@ -64,8 +64,8 @@ def container_order(planned: Plan) -> list[str]:
 
 
 def model_identifier(path: Path) -> str:
-    """The container's model identifier: its file's stem as a C identifier (``3rrp-circle.fmu``:
-    ``_3rrp_circle``), the prefix of its binary's FMI functions."""
+    """The container's model identifier: its file's stem as a C identifier (``2-link arm.fmu``:
+    ``_2_link_arm``), the prefix of its binary's FMI functions."""
     return re.sub(r"\W|^(?=\d)", "_", Path(path).stem)
 
 

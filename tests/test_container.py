@@ -119,6 +119,7 @@ def test_the_container_is_a_valid_block_with_the_diagram_open_ends_as_ports(cont
 def test_model_identifier_is_the_file_stem_as_a_c_identifier():
     assert model_identifier("out/chess-pd.fmu") == "chess_pd"
     assert model_identifier("3rrp-circle.fmu") == "_3rrp_circle"
+    assert model_identifier("2-link arm.fmu") == "_2_link_arm"
 
 
 def test_sequential_order_puts_the_blocks_without_feedthrough_first(fmu_root):

@@ -1,5 +1,6 @@
 """Benchmark: a whole experiment (default chess-pd, 13 s) through the robofmu master, the same
-block logic in one Python loop without FMI, and libcosim on the SSP export of the same diagram.
+block logic in one Python loop without FMI, libcosim and ecos on the SSP export of the same
+diagram, and the diagram as one FMU container.
 
     .venv/bin/python benchmarks/loop.py [--experiment chess-pd] [--fmus fmus] [--steps 0.001 0.005] [--stop 13]
 
@@ -12,13 +13,20 @@ Runners (each in a fresh child process, one after the other):
 - ``libcosim``: :func:`robofmu.system.ssp.run_ssp_libcosim` on ``export_ssp(system)``
   (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
   observer, Booleans cannot be);
+- ``ecos``: :func:`robofmu.system.ssp.run_ssp_ecos` on the same SSP export (ecos's fixed-step
+  algorithm, the components stepped in parallel threads; Real outputs read through ecospy
+  after every step);
+- ``container``: :func:`robofmu.system.container.export_container` of the same diagram (one FMU,
+  fmu-manipulation-toolbox's C runtime stepping the block FMUs in the master's Gauss-Seidel
+  order), driven through fmpy's ``FMU2Slave``: ``doStep`` and one ``getReal`` of every recorded
+  variable per step; it reproduces the master bit for bit;
 - ``C++ floor``: the same loop on Pinocchio's C++ API (``benchmarks/floor.py``: compiled here
   where a compiler and the headers are found, else skipped with a note), the physical limit
   the Python runners are measured against.
 
 Columns: ``wall`` is the whole call (loading and initializing the FMUs included; for libcosim
 also unpacking the SSP), ``per step`` the stepping loop alone divided by the number of steps
-(``ratio`` compares these), ``peak memory`` the child's peak resident set size
+(``ratio`` compares these; the container's wall includes building it), ``peak memory`` the child's peak resident set size
 (``VmHWM`` of ``/proc/self/status`` after the run, see :func:`_peak_mb`: interpreter, NumPy,
 Pinocchio and, for FMU runners, the FMU libraries and their instances included); ``imports`` is
 the same high-water mark taken before the run starts. Times are the best of ``--repeat`` fresh
@@ -38,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-RUNNERS = ("robofmu", "in-process", "libcosim")
+RUNNERS = ("robofmu", "in-process", "libcosim", "ecos", "container")
 
 
 def _peak_mb() -> float:
@@ -58,6 +66,34 @@ def _peak_mb() -> float:
 
 
 # -- one runner in this (child) process ------------------------------------------------------------------
+def run_container_loop(path: Path, stop: float, h: float):
+    """The container through fmpy's FMU2Slave: (time, columns, data, seconds of the stepping loop)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    md = read_model_description(str(path))
+    variables = [v for v in md.modelVariables if v.type == "Real" and v.causality in ("output", "local")]
+    references = [v.valueReference for v in variables]
+    n = int(round(stop / h))
+    folder = extract(str(path))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="container")
+    slave.instantiate(loggingOn=False)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    data = np.empty((n + 1, len(references)))
+    data[0] = slave.getReal(references)
+    t0 = time.perf_counter()
+    for k in range(n):
+        slave.doStep(k * h, h)
+        data[k + 1] = slave.getReal(references)
+    loop = time.perf_counter() - t0
+    slave.terminate()
+    slave.freeInstance()
+    return h * np.arange(n + 1), [v.name for v in variables], data, loop
+
+
 def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None,
           out: Path) -> dict:
     import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
@@ -68,6 +104,10 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
     n_steps = int(round(stop / h))
     if runner == "libcosim":
         import libcosimpy.CosimExecution  # noqa: F401  (loaded before the "imports" mark, as for the others)
+    elif runner == "ecos":
+        from robofmu.system.ssp import load_ecospy
+
+        load_ecospy()
     imports_mb = _peak_mb()
     t0 = time.perf_counter()
     if runner == "robofmu":
@@ -86,6 +126,17 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
         result = run_ssp_libcosim(ssp, stop, h)
         loop = result.info["wall_time"]
         times, columns, data = result.time, result.columns, result.data
+    elif runner == "ecos":
+        from robofmu.system.ssp import run_ssp_ecos
+
+        result = run_ssp_ecos(ssp, stop, h)
+        loop = result.info["wall_time"]
+        times, columns, data = result.time, result.columns, result.data
+    elif runner == "container":
+        from robofmu.system.container import export_container
+
+        system.step = h
+        times, columns, data, loop = run_container_loop(export_container(system, out.with_suffix(".fmu")), stop, h)
     else:
         raise ValueError(runner)
     wall = time.perf_counter() - t0
@@ -211,6 +262,11 @@ def main(argv=None) -> int:
             d, c = max_diff(got["libcosim"]["npz"], got["robofmu"]["npz"], f"{q}[")
             checks.append(f"h = {h * 1e3:g} ms: libcosim (Jacobi) vs robofmu master (Gauss-Seidel): "
                           f"max |q diff| = {d:.3g} (rad or m; {c})")
+            d, c = max_diff(got["ecos"]["npz"], got["libcosim"]["npz"], f"{q}[")
+            checks.append(f"h = {h * 1e3:g} ms: ecos vs libcosim (both Jacobi): max |q diff| = {d:.3g} (rad or m; {c})")
+            d, c = max_diff(got["container"]["npz"], got["robofmu"]["npz"])
+            checks.append(f"h = {h * 1e3:g} ms: container vs robofmu master (both Gauss-Seidel), max |diff| over "
+                          f"every output = {d:.3g} ({c})")
 
     print(f"{experiment}, {stop:g} s task; each runner in a fresh process\n")
     header = (f"{'runner':<12}{'h (ms)':>8}{'wall (s)':>10}{'per step (us)':>15}{'x in-process':>14}"
@@ -223,7 +279,7 @@ def main(argv=None) -> int:
     if floor_note:
         print(f"\n{floor_note}")
     print(f"\nbest of {args.repeat} fresh processes, taking turns. wall: whole call incl. loading/initializing the FMUs "
-          "(libcosim: also unpacking the SSP);\nper step: stepping loop only; peak memory: VmHWM of the "
+          "(libcosim, ecos: also unpacking the SSP; container: also building it);\nper step: stepping loop only; peak memory: VmHWM of the "
           "child process after the run (imports: the same before the run).\n")
     for line in checks:
         print(line)

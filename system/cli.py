@@ -127,44 +127,39 @@ def _sweep(args) -> int:
     return 0                          # failed runs are rows of the map, not a failure of the sweep
 
 
-def _ssp(args) -> int:
+def _export(command: str, args, suffix: str, write) -> int:
+    """Load ``args.experiment``, check the output file and the FMU folder, then ``write(system,
+    out)``; print the path written. The one shape of ``robofmu ssp`` and ``robofmu container``."""
     from robofmu.system.experiment import load
     from robofmu.system.runner import check_fmu_folder, check_writable
-    from robofmu.system.ssp import export_ssp
 
+    out = args.out
     try:
         system = load(args.experiment, fmu_dir=args.fmus)
-        out = Path(args.out or f"{system.name}.ssp")
+        out = Path(args.out or f"{system.name}{suffix}")
         check_writable(out, "--out" if args.out else "the default output", file=True)
         check_fmu_folder(system)
-        written = export_ssp(system, out, inline=args.inline)
-    except ValueError as exc:          # UsageError, ExperimentError, DiagramError
-        return _stopped("ssp", exc)
+        written = write(system, out)
+    except ValueError as exc:          # UsageError, ExperimentError, DiagramError, a tool's refusal
+        return _stopped(command, exc)
     except OSError as exc:
-        _say("ssp", f"cannot write {out}: {exc.strerror or exc}")
+        _say(command, f"cannot write {out}: {exc.strerror or exc}")
         return 1
     print(written)
     return 0
+
+
+def _ssp(args) -> int:
+    from robofmu.system.ssp import export_ssp
+
+    return _export("ssp", args, ".ssp", lambda system, out: export_ssp(system, out, inline=args.inline))
 
 
 def _container(args) -> int:
     from robofmu.system.container import export_container
-    from robofmu.system.experiment import load
-    from robofmu.system.runner import check_fmu_folder, check_writable
 
-    try:
-        system = load(args.experiment, fmu_dir=args.fmus)
-        out = Path(args.out or f"{system.name}.fmu")
-        check_writable(out, "--out" if args.out else "the default output", file=True)
-        check_fmu_folder(system)
-        written = export_container(system, out, algorithm=args.algorithm)
-    except ValueError as exc:          # UsageError, ExperimentError, DiagramError, the toolbox's refusal
-        return _stopped("container", exc)
-    except OSError as exc:
-        _say("container", f"cannot write {out}: {exc.strerror or exc}")
-        return 1
-    print(written)
-    return 0
+    return _export("container", args, ".fmu",
+                   lambda system, out: export_container(system, out, algorithm=args.algorithm))
 
 
 def _demo(args) -> int:

@@ -20,7 +20,7 @@ import pytest
 from fmu_util import robot_experiments
 from robofmu.system import experiment
 from robofmu.system.check import plan
-from robofmu.system.master import Master
+from robofmu.system.master import Master, SimulationError
 from robofmu.system.ssp import export_ssp, load_ecospy, run_ssp_ecos
 
 try:
@@ -87,3 +87,27 @@ def test_two_ecos_runs_in_one_process_are_identical(packages):
     _, path = packages("chess-pd")
     first, second = run_ssp_ecos(path, 0.1, 1e-3), run_ssp_ecos(path, 0.1, 1e-3)
     np.testing.assert_array_equal(first.data, second.data)
+
+
+@pytest.mark.parametrize("change, block, time, rows", [
+    ({"controller.kp": -1.0}, "controller", 0.0, 0),       # refused at initialization
+    ({"controller.kd": 1e308}, "plant", 0.002, 3),          # an infinite torque: the plant refuses its step
+])
+def test_a_refusing_block_stops_ecos_as_it_stops_the_master(packages, tmp_path, change, block, time, rows):
+    """ecos ignores FMI statuses; the runner reads the FMUs' messages from its debug log and stops
+    at the first error, naming the block, the time and the FMU's reason, keeping the rows before."""
+    system, _ = packages("chess-pd")
+    broken = experiment.with_parameters(system, change)
+    with pytest.raises(SimulationError) as master:
+        Master(broken).run(STOP, system.step, "jacobi")
+    with pytest.raises(SimulationError) as ecos:
+        run_ssp_ecos(export_ssp(broken, tmp_path / "broken.ssp"), STOP, system.step)
+    assert (ecos.value.block, ecos.value.time) == (master.value.block, master.value.time) == (block, time)
+    assert master.value.reason.rsplit(f"{block}: ", 1)[-1] in str(ecos.value)     # the FMU's own words
+    assert str(ecos.value).startswith(f"ecos: {block} at t = {time:g} s: fmi2Error: ")
+    if rows:
+        assert len(ecos.value.result.time) == rows
+        np.testing.assert_allclose(ecos.value.result.vector("plant.q"), master.value.result.vector("plant.q")[:rows],
+                                   rtol=0, atol=1e-12)
+    else:
+        assert ecos.value.result is None

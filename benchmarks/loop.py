@@ -18,8 +18,9 @@ Runners (each in a fresh child process, one after the other):
   after every step);
 - ``container``: :func:`robofmu.system.container.export_container` of the same diagram (one FMU,
   fmu-manipulation-toolbox's C runtime stepping the block FMUs in the master's Gauss-Seidel
-  order), driven through fmpy's ``FMU2Slave``: ``doStep`` and one ``getReal`` of every recorded
-  variable per step; it reproduces the master bit for bit;
+  order), run by :func:`robofmu.system.container.run_container` (fmpy's ``FMU2Slave``: ``doStep``,
+  one ``getReal`` and one ``getBoolean`` of the recorded variables per step); it reproduces the
+  master bit for bit;
 - ``C++ floor``: the same loop on Pinocchio's C++ API (``benchmarks/floor.py``: compiled here
   where a compiler and the headers are found, else skipped with a note), the physical limit
   the Python runners are measured against.
@@ -66,34 +67,6 @@ def _peak_mb() -> float:
 
 
 # -- one runner in this (child) process ------------------------------------------------------------------
-def run_container_loop(path: Path, stop: float, h: float):
-    """The container through fmpy's FMU2Slave: (time, columns, data, seconds of the stepping loop)."""
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
-
-    md = read_model_description(str(path))
-    variables = [v for v in md.modelVariables if v.type == "Real" and v.causality in ("output", "local")]
-    references = [v.valueReference for v in variables]
-    n = int(round(stop / h))
-    folder = extract(str(path))
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                      instanceName="container")
-    slave.instantiate(loggingOn=False)
-    slave.setupExperiment(startTime=0.0)
-    slave.enterInitializationMode()
-    slave.exitInitializationMode()
-    data = np.empty((n + 1, len(references)))
-    data[0] = slave.getReal(references)
-    t0 = time.perf_counter()
-    for k in range(n):
-        slave.doStep(k * h, h)
-        data[k + 1] = slave.getReal(references)
-    loop = time.perf_counter() - t0
-    slave.terminate()
-    slave.freeInstance()
-    return h * np.arange(n + 1), [v.name for v in variables], data, loop
-
-
 def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, ssp: Path | None,
           out: Path) -> dict:
     import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
@@ -133,10 +106,12 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
         loop = result.info["wall_time"]
         times, columns, data = result.time, result.columns, result.data
     elif runner == "container":
-        from robofmu.system.container import export_container
+        from robofmu.system.container import export_container, run_container
 
         system.step = h
-        times, columns, data, loop = run_container_loop(export_container(system, out.with_suffix(".fmu")), stop, h)
+        result = run_container(export_container(system, out.with_suffix(".fmu")), stop, h)
+        loop = result.info["wall_time"]
+        times, columns, data = result.time, result.columns, result.data
     else:
         raise ValueError(runner)
     wall = time.perf_counter() - t0

@@ -140,9 +140,13 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
     return path
 
 
+#: An embedded block's message as the container relays it: ``<block>.fmu: <instance>.<block>.fmu: text``.
+_RELAYED = re.compile(r"^(?P<block>[^:]+)\.fmu: (?:\S+\.(?P=block)\.fmu: )?(?P<text>.*)$", re.S)
+
+
 def run_container(path: str | Path, stop_time: float, step: float | None = None, start_time: float = 0.0,
                   record: list[str] | None = None) -> Result:
-    """Simulate a container FMU with fmpy, recording its outputs and locals at every step.
+    """Simulate a container FMU through fmpy, recording its outputs and locals at every step.
 
     Parameters
     ----------
@@ -161,43 +165,55 @@ def run_container(path: str | Path, stop_time: float, step: float | None = None,
     Returns
     -------
     Result
-        Rows at t0, t0 + h, ..., t0 + n h; ``info["messages"]`` holds what the container and
-        its FMUs logged.
+        Rows at t0, t0 + h, ..., t0 + n h; ``info["wall_time"]`` is the stepping loop's, and
+        ``info["messages"]`` holds what the container and its blocks logged.
 
     Raises
     ------
-    RuntimeError
-        The container failed (an FMU refused a step or its initialization): fmpy's error and
-        the last messages logged, which name the block, variable and time.
+    SimulationError
+        The container failed (a block refused its initialization or a step): the block, the
+        time, the block's own message, and every row recorded before (``result``).
     """
-    from fmpy import read_model_description, simulate_fmu
+    from .fmu import Block, FMUError
+    from .master import SimulationError
 
-    from .libcosim import guard_pythonfmu_exit       # ctypes only: libcosimpy is not needed
+    path = Path(path)
+    with Block(path, path.stem) as box:
+        step = step if step is not None else float(box.md.defaultExperiment.stepSize)
+        n = step_count(start_time, stop_time, step)
+        signals = [v.name for v in box.md.modelVariables
+                   if v.type in ("Real", "Boolean") and v.causality in ("output", "local")]
+        keep = [signals[k] for k in select(signals, record)]
+        kinds = {kind: ([j for j, name in enumerate(keep) if box.variables[name].type == kind],
+                        [box.variables[name].valueReference for name in keep if box.variables[name].type == kind])
+                 for kind in ("Real", "Boolean")}
+        (real_columns, reals), (boolean_columns, booleans) = kinds["Real"], kinds["Boolean"]
+        times = start_time + step * np.arange(n + 1)
+        data = np.empty((n + 1, len(keep)))
 
-    guard_pythonfmu_exit()
-    md = read_model_description(str(path))
-    step = step if step is not None else float(md.defaultExperiment.stepSize)
-    n = step_count(start_time, stop_time, step)
-    signals = [v.name for v in md.modelVariables
-               if v.type in ("Real", "Boolean") and v.causality in ("output", "local")]
-    keep = [signals[k] for k in select(signals, record)]
-    messages = []
+        def record_row(k: int) -> None:
+            data[k, real_columns] = box.get_real(reals)
+            if booleans:
+                data[k, boolean_columns] = box.get_boolean(booleans)
 
-    def log(component, instance, status, category, message):
-        messages.append(message.decode(errors="replace"))
-
-    wall = _time.perf_counter()
-    try:
-        rows = simulate_fmu(str(path), start_time=start_time, stop_time=start_time + n * step, step_size=step,
-                            output_interval=step, output=keep, logger=log)
-    except Exception as exc:                 # fmpy raises a bare Exception for a failed FMI call
-        blocks = [m for m in messages if ".fmu: " in m]       # an embedded FMU's, not the container's chatter
-        said = "; ".join((blocks or messages)[-3:])
-        raise RuntimeError(f"{Path(path).name}: {exc}" + (f"; the FMUs said: {said}" if said else "")) from None
-    wall = _time.perf_counter() - wall
-    if len(rows) != n + 1:
-        raise RuntimeError(f"fmpy recorded {len(rows)} rows of {Path(path).name}, expected {n + 1}")
-    data = np.column_stack([rows[c].astype(float) for c in keep]) if keep else np.zeros((n + 1, 0))
-    return Result(start_time + step * np.arange(n + 1), keep, data,
-                  {"tool": "fmpy", "container": Path(path).name, "step": step, "wall_time": wall,
-                   "messages": messages})
+        k, wall = 0, 0.0
+        try:
+            box.initialize(start_time, stop_time=start_time + n * step)
+            record_row(0)
+            wall = _time.perf_counter()
+            for k in range(1, n + 1):
+                box.do_step(times[k - 1], step)
+                record_row(k)
+            wall = _time.perf_counter() - wall
+        except FMUError as exc:
+            relayed = [m for m in (_RELAYED.match(m.message) for m in box.messages
+                                   if m.status in ("ERROR", "FATAL")) if m]
+            block, said = (relayed[-1]["block"], relayed[-1]["text"]) if relayed else (path.stem, str(exc))
+            t = times[k - 1] if k else start_time
+            partial = Result(times[:k], keep, data[:k].copy(), {"tool": "fmpy", "container": path.name}) if k else None
+            message = f"{path.name}: {block} at t = {t:.9g} s: {said}"
+            raise SimulationError(message + (f"; {k} rows recorded before it" if k else ""), block, t, partial,
+                                  reason=message) from None
+        messages = [m.message for m in box.messages]
+    return Result(times, keep, data, {"tool": "fmpy", "container": path.name, "step": step, "wall_time": wall,
+                                      "messages": messages})

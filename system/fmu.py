@@ -216,6 +216,9 @@ class Block:
     def get_real(self, vrs: list[int]) -> list[float]:
         return self._call("fmi2GetReal", self.slave.getReal, vrs)
 
+    def get_boolean(self, vrs: list[int]) -> list[bool]:
+        return self._call("fmi2GetBoolean", self.slave.getBoolean, vrs)
+
     def set_real(self, vrs: list[int], values) -> None:
         self._call("fmi2SetReal", self.slave.setReal, vrs, values)
 

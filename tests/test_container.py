@@ -26,7 +26,7 @@ from fmu_util import robot_experiments  # noqa: E402
 from robofmu.system import experiment  # noqa: E402
 from robofmu.system.check import plan  # noqa: E402
 from robofmu.system.container import container_order, export_container, model_identifier, run_container  # noqa: E402
-from robofmu.system.master import Master  # noqa: E402
+from robofmu.system.master import Master, SimulationError  # noqa: E402
 
 STOP = 0.5              # s
 ALGORITHMS = ["gauss-seidel", "jacobi"]
@@ -133,15 +133,25 @@ def test_two_runs_of_one_container_in_one_process_are_identical(containers):
     np.testing.assert_array_equal(first.data, second.data)
 
 
-def test_a_failing_block_stops_the_container_with_its_message(fmu_root, tmp_path):
-    """A block that refuses its initialization (kp < 0) fails the container's, and what the
-    controller logged reaches the caller."""
-    system = experiment.load("chess-pd", fmu_dir=fmu_root)
-    controller = next(b for b in system.blocks if b.name == "controller")
-    controller.parameters["kp"] = -1.0
-    path = export_container(system, tmp_path / "bad.fmu")
-    with pytest.raises(RuntimeError, match=r"bad\.fmu: .*kp"):
-        run_container(path, 0.01)
+@pytest.mark.parametrize("change, block, time, rows", [
+    ({"controller.kp": -1.0}, "controller", 0.0, 0),       # refused at initialization
+    ({"controller.kd": 1e308}, "plant", 0.001, 2),          # an infinite torque: the plant refuses its step
+])
+def test_a_refusing_block_stops_the_container_as_it_stops_the_master(fmu_root, tmp_path, change, block, time, rows):
+    """The container passes a block's fmi2Error on, with the block's message: the run stops at the
+    master's block and time, with the block's own words and the rows before."""
+    broken = experiment.with_parameters(experiment.load("chess-pd", fmu_dir=fmu_root), change)
+    with pytest.raises(SimulationError) as master:
+        Master(broken).run(0.05, broken.step)
+    with pytest.raises(SimulationError) as boxed:
+        run_container(export_container(broken, tmp_path / "bad.fmu"), 0.05)
+    assert (boxed.value.block, boxed.value.time) == (master.value.block, master.value.time) == (block, time)
+    assert str(boxed.value).startswith(f"bad.fmu: {block} at t = {time:g} s: ")
+    assert master.value.reason.rsplit(f"{block}: ", 1)[-1] in str(boxed.value)      # the block's own words
+    if rows:
+        np.testing.assert_array_equal(boxed.value.result.vector("plant.q"), master.value.result.vector("plant.q"))
+    else:
+        assert boxed.value.result is None
 
 
 def test_unknown_algorithm_is_refused(fmu_root, tmp_path):

@@ -300,8 +300,9 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
                        description="Package the experiment's block FMUs, wires and parameters as one FMI 2.0 "
                                    "co-simulation FMU (fmu-manipulation-toolbox's FMU container) that any FMI "
                                    "tool runs as a single block. It steps the blocks at the experiment's step "
-                                   "and reproduces the master's run bit for bit: Gauss-Seidel (sequential "
-                                   "mode, blocks without feedthrough first) or Jacobi (parallel mode). The "
+                                   "and reproduces the master's run: Gauss-Seidel (sequential mode, blocks "
+                                   "without feedthrough first) or Jacobi (parallel mode), bit for bit for a PD "
+                                   "loop (a PID's integral differs at first order in the step). The "
                                    "diagram's unwired inputs are its inputs (the experiment's values as start "
                                    "values), its unwired outputs its outputs, the wired signals its locals, "
                                    "all named BLOCK.VARIABLE.")

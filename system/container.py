@@ -19,11 +19,12 @@ output, on every robot: tests/test_container.py):
 ``algorithm="gauss-seidel"``
     The container's sequential mode, with the blocks in this order: first every block without
     direct feedthrough (the plant, the trajectory: their outputs at t + h do not depend on their
-    inputs at t + h), then the feedthrough blocks in the diagram's evaluation order. Each block
-    gets the values its sources have just produced. Within a step from t the plant steps with
-    the torque computed at t; the feedthrough blocks (ik, controller) then step with their
-    inputs at t + h, so that their outputs, read after the step, are the master's Gauss-Seidel
-    values at t + h. A feedthrough block with a state of its own (the PID's integral) advances it
+    inputs at t + h), each before the blocks it takes inputs from (the plant before the
+    trajectory that sets its ``grip``), then the feedthrough blocks in the diagram's evaluation
+    order. Each block gets the values its sources have produced last. Within a step from t the
+    blocks without feedthrough step with their inputs of t (the plant with the torque and the
+    grip of t); the feedthrough blocks (ik, controller) then step with their inputs of t + h,
+    so that their outputs, read after the step, are the master's Gauss-Seidel values at t + h. A feedthrough block with a state of its own (the PID's integral) advances it
     over [t, t + h] with its inputs at t + h, not at t: there the two runs differ by a term of
     first order in h (ki h |de|); a PD loop is reproduced bit for bit.
 
@@ -58,9 +59,27 @@ ALGORITHMS = ("gauss-seidel", "jacobi")
 
 def container_order(planned: Plan) -> list[str]:
     """The instance names in the order the container initializes and (sequential mode) steps
-    them: the blocks without direct feedthrough first, then the others in evaluation order."""
+    them: the blocks without direct feedthrough first, each before the blocks it takes inputs
+    from, then the others in evaluation order (see the module notes).
+
+    Raises
+    ------
+    ValueError
+        Blocks without direct feedthrough feed each other in a cycle: no sequential order steps
+        each of them with its inputs of t.
+    """
     stateful = [b for b in planned.order if not any(planned.nodes[b].feedthrough.values())]
-    return stateful + [b for b in planned.order if b not in stateful]
+    readers = {b: {link.target for link in planned.links if link.source == b and link.target in stateful} - {b}
+               for b in stateful}
+    order: list[str] = []
+    while len(order) < len(stateful):
+        ready = [b for b in stateful if b not in order and readers[b] <= set(order)]
+        if not ready:
+            cycle = [b for b in stateful if b not in order]
+            raise ValueError(f"blocks without direct feedthrough feed each other ({', '.join(cycle)}): a "
+                             "sequential container cannot step each with its inputs of t; use jacobi")
+        order.append(ready[0])
+    return order + [b for b in planned.order if b not in stateful]
 
 
 def model_identifier(path: Path) -> str:
@@ -111,7 +130,13 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
         raise ValueError(f"algorithm {algorithm!r}: one of {', '.join(ALGORITHMS)}")
     path = Path(path)
     planned = plan(system)
-    fmu_name = {b: f"{b}.fmu" for b in container_order(planned)}   # the container names a block by a file name
+    try:
+        order = container_order(planned)
+    except ValueError:
+        if algorithm == "gauss-seidel":
+            raise
+        order = planned.order                # parallel mode: any order steps them alike
+    fmu_name = {b: f"{b}.fmu" for b in order}          # the container names a block by a file name
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=".container-", dir=path.parent) as folder, _quiet_toolbox():
         try:

@@ -6,7 +6,7 @@ the master's Jacobi exchange; its initialization passes connected values along o
 component, so the loop starts consistent. Hence, on one PD experiment per robot:
 
 - the blocks without direct feedthrough (trajectory, plant) record what the master records, to
-  rounding (ecos accumulates its time, t += h; the master computes k h);
+  rounding (ecos accumulates its time, t += h, n eps t off after n steps; the master computes k h);
 - a feedthrough block (ik, controller, fk, jacobian) records, in ecos, its outputs for the inputs
   transferred after the step (ecos sets them and reads every output again), i.e. the master's
   value one row later. The Newton-Raphson IK's ``iterations`` is left out there: the solve ecos
@@ -47,27 +47,31 @@ def packages(fmu_root, tmp_path_factory):
 
 @pytest.mark.parametrize("name", robot_experiments())
 def test_ecos_reproduces_the_master_in_jacobi_mode(packages, name):
+    """The whole experiment (chess: the gripper closes at 6 s and opens at 11.5 s)."""
     system, path = packages(name)
     h = system.step
-    ecos = run_ssp_ecos(path, STOP, h)
-    jacobi = Master(system).run(STOP, h, "jacobi")
-    np.testing.assert_allclose(ecos.time, jacobi.time, rtol=0, atol=1e-12)
+    ecos = run_ssp_ecos(path, system.stop_time, h)
+    jacobi = Master(system).run(system.stop_time, h, "jacobi")
+    n = len(jacobi.time) - 1                  # ecos adds h n times: rounding of at most n eps t
+    np.testing.assert_allclose(ecos.time, jacobi.time, rtol=0, atol=n * np.finfo(float).eps * system.stop_time)
     real = [c for c in jacobi.columns if not c.endswith(("grip", "reachable"))]       # the Booleans
     assert sorted(ecos.columns) == sorted(real)
     planned = plan(system)
     feedthrough = {b for b, node in planned.nodes.items() if any(node.feedthrough.values())}
     assert {"ik", "controller"} & feedthrough and "plant" not in feedthrough
+    # ecos's accumulated time is off by up to n eps t (3.7e-11 s after 13 s at 1 ms): the references
+    # move by their rate times that (measured: 5e-12 over the chess run), hence 1e-10 of the range
     for column in ecos.columns:
         block = column.split(".", 1)[0]
         scale = max(1.0, np.max(np.abs(jacobi[column])))
         if block not in feedthrough:
-            np.testing.assert_allclose(ecos[column], jacobi[column], rtol=0, atol=1e-12 * scale, err_msg=column)
+            np.testing.assert_allclose(ecos[column], jacobi[column], rtol=0, atol=1e-10 * scale, err_msg=column)
         elif not column.endswith(".iterations"):
-            np.testing.assert_allclose(ecos[column][:-1], jacobi[column][1:], rtol=0, atol=1e-12 * scale,
+            np.testing.assert_allclose(ecos[column][:-1], jacobi[column][1:], rtol=0, atol=1e-10 * scale,
                                        err_msg=column)
     # not vacuous: the master's Gauss-Seidel run is another run
     gauss_seidel = Master(system).run(STOP, h, "gauss-seidel")
-    assert np.max(np.abs(gauss_seidel.vector("plant.q") - jacobi.vector("plant.q"))) > 1e-9
+    assert np.max(np.abs(gauss_seidel.vector("plant.q") - jacobi.vector("plant.q")[:len(gauss_seidel.time)])) > 1e-9
 
 
 def test_ecos_applies_the_packages_parameter_set(packages, fmu_root, tmp_path):

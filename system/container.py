@@ -24,9 +24,10 @@ output, on every robot: tests/test_container.py):
     order. Each block gets the values its sources have produced last. Within a step from t the
     blocks without feedthrough step with their inputs of t (the plant with the torque and the
     grip of t); the feedthrough blocks (ik, controller) then step with their inputs of t + h,
-    so that their outputs, read after the step, are the master's Gauss-Seidel values at t + h. A feedthrough block with a state of its own (the PID's integral) advances it
-    over [t, t + h] with its inputs at t + h, not at t: there the two runs differ by a term of
-    first order in h (ki h |de|); a PD loop is reproduced bit for bit.
+    so that their outputs, read after the step, are the master's Gauss-Seidel values at t + h.
+    A feedthrough block with a state of its own (the PID's integral) advances it over [t, t + h]
+    with its inputs at t + h, not at t: there the two runs differ by a term of first order in h
+    (ki h |de|); a PD loop is reproduced bit for bit.
 
 In both modes the container initializes the blocks in that order, each with the initial outputs
 of the blocks feeding it, so the loop starts consistent at t0, as the master's does.
@@ -48,13 +49,11 @@ import numpy as np
 
 from .check import Plan, plan, step_count
 from .diagram import System, select
+from .master import ALGORITHMS, SimulationError
 from .result import Result
 from .ssp import parameter_values
 
-__all__ = ["ALGORITHMS", "container_order", "export_container", "model_identifier", "run_container"]
-
-#: The master's algorithms a container can reproduce.
-ALGORITHMS = ("gauss-seidel", "jacobi")
+__all__ = ["container_order", "export_container", "model_identifier", "run_container"]
 
 
 def container_order(planned: Plan) -> list[str]:
@@ -127,7 +126,7 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
 
     algorithm = algorithm or system.algorithm
     if algorithm not in ALGORITHMS:
-        raise ValueError(f"algorithm {algorithm!r}: one of {', '.join(ALGORITHMS)}")
+        raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(ALGORITHMS)}")
     path = Path(path)
     planned = plan(system)
     try:
@@ -200,7 +199,6 @@ def run_container(path: str | Path, stop_time: float, step: float | None = None,
         time, the block's own message, and every row recorded before (``result``).
     """
     from .fmu import Block, FMUError
-    from .master import SimulationError
 
     path = Path(path)
     with Block(path, path.stem) as box:

@@ -289,8 +289,8 @@ def interop_section(plan: dict, out: Path, fmu_dir) -> list[str]:
     for name in plan["experiments"]:
         _say(f"other FMI tools: {name}")
         runs = compare_tools(load(name, fmu_dir=fmu_dir), plan["stop_time"], out / "interop")
-        header = header or ["experiment", *[f"{r.tool} vs master {r.algorithm} ({r.compared if r.compared == 'every output' else 'q'})"
-                                            for r in runs]]
+        header = header or ["experiment", *[f"{r.tool} vs master {r.algorithm} "
+                                            f"({'every output' if r.compared == 'every output' else 'q'})" for r in runs]]
         rows.append([name, *[r.note or ("0 (bit for bit)" if r.difference == 0 else f"{r.difference:.2g}")
                              for r in runs]])
     return [*lines, markdown_table(rows, header), "",

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .diagram import System
-from .master import Master
+from .master import ALGORITHMS, Master
 from .result import Result
 
 __all__ = ["ToolRun", "compare_tools"]
@@ -76,7 +76,7 @@ def compare_tools(system: System, stop_time: float, folder: Path) -> list[ToolRu
 
     folder = Path(folder)
     h = system.step
-    masters = {a: Master(system).run(stop_time, h, a) for a in ("gauss-seidel", "jacobi")}
+    masters = {a: Master(system).run(stop_time, h, a) for a in ALGORITHMS}
     runs = []
     for algorithm, master in masters.items():
         path = export_container(system, folder / f"{system.name}-{algorithm}.fmu", algorithm)

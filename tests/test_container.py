@@ -171,7 +171,7 @@ def test_a_refusing_block_stops_the_container_as_it_stops_the_master(fmu_root, t
 
 def test_unknown_algorithm_is_refused(fmu_root, tmp_path):
     system = experiment.load("chess-pd", fmu_dir=fmu_root)
-    with pytest.raises(ValueError, match="algorithm 'rk4': one of gauss-seidel, jacobi"):
+    with pytest.raises(ValueError, match="algorithm 'rk4': choose one of gauss-seidel, jacobi"):
         export_container(system, tmp_path / "x.fmu", "rk4")
     assert not (tmp_path / "x.fmu").exists()
 

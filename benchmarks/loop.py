@@ -85,38 +85,29 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
     t0 = time.perf_counter()
     if runner == "robofmu":
         result = Master(system).run(stop, h)
-        loop = result.info["wall_time"]
-        times, columns, data = result.time, result.columns, result.data
     elif runner == "in-process":
         from robofmu.system.replica import InProcessDiagram
 
         result = InProcessDiagram(system).sampled(h, stop)
-        loop = result.info["wall_time"]
-        times, columns, data = result.time, result.columns, result.data
     elif runner == "libcosim":
         from robofmu.system.ssp import run_ssp_libcosim
 
         result = run_ssp_libcosim(ssp, stop, h)
-        loop = result.info["wall_time"]
-        times, columns, data = result.time, result.columns, result.data
     elif runner == "ecos":
         from robofmu.system.ssp import run_ssp_ecos
 
         result = run_ssp_ecos(ssp, stop, h)
-        loop = result.info["wall_time"]
-        times, columns, data = result.time, result.columns, result.data
     elif runner == "container":
         from robofmu.system.container import export_container, run_container
 
         system.step = h
         result = run_container(export_container(system, out.with_suffix(".fmu")), stop, h)
-        loop = result.info["wall_time"]
-        times, columns, data = result.time, result.columns, result.data
     else:
         raise ValueError(runner)
+    loop = result.info["wall_time"]                  # each runner's stepping loop alone
     wall = time.perf_counter() - t0
     peak = _peak_mb()
-    np.savez(out, time=times, data=data, columns=np.array(columns))
+    np.savez(out, time=result.time, data=result.data, columns=np.array(result.columns))
     return {"runner": runner, "h": h, "n_steps": n_steps, "wall": wall, "loop": loop,
             "peak_mb": peak, "imports_mb": imports_mb}
 

@@ -37,12 +37,10 @@ what ``robofmu doctor`` lists (in a non-Python host: libpython preloaded, the ve
 """
 from __future__ import annotations
 
-import logging
 import re
 import shutil
 import tempfile
 import time as _time
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +50,7 @@ from .diagram import System, select
 from .master import ALGORITHMS, SimulationError
 from .result import Result
 from .ssp import parameter_values
+from .validate import toolbox_errors_only
 
 __all__ = ["container_order", "export_container", "model_identifier", "run_container"]
 
@@ -85,19 +84,6 @@ def model_identifier(path: Path) -> str:
     """The container's model identifier: its file's stem as a C identifier (``2-link arm.fmu``:
     ``_2_link_arm``), the prefix of its binary's FMI functions."""
     return re.sub(r"\W|^(?=\d)", "_", Path(path).stem)
-
-
-@contextmanager
-def _quiet_toolbox():
-    """fmu-manipulation-toolbox logs every build step, and warns of what is meant here (inputs
-    left unwired keep their start values; the loop through the controller): keep its errors."""
-    logger = logging.getLogger("fmu_manipulation_toolbox")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    try:
-        yield
-    finally:
-        logger.setLevel(level)
 
 
 def export_container(system: System, path: str | Path, algorithm: str | None = None) -> Path:
@@ -137,7 +123,9 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
         order = planned.order                # parallel mode: any order steps them alike
     fmu_name = {b: f"{b}.fmu" for b in order}          # the container names a block by a file name
     path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".container-", dir=path.parent) as folder, _quiet_toolbox():
+    # the toolbox logs every build step and warns of what is meant here (the loop through the
+    # controller is initialized without the values it gets from the loop): its errors only
+    with tempfile.TemporaryDirectory(prefix=".container-", dir=path.parent) as folder, toolbox_errors_only():
         try:
             container = FMUContainer(model_identifier(path), folder)
             container.start_time, container.stop_time = 0.0, system.stop_time

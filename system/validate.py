@@ -5,6 +5,7 @@ the model structure's references)."""
 from __future__ import annotations
 
 import logging
+from contextlib import contextmanager
 from pathlib import Path
 
 
@@ -26,25 +27,37 @@ class _Errors(logging.Handler):
         self.messages.append(record.getMessage())
 
 
+@contextmanager
+def toolbox_errors_only(handler: logging.Handler | None = None):
+    """While the block runs, fmu-manipulation-toolbox's logger passes on its errors only (its
+    INFO and WARNING lines are a console tool's), to ``handler`` where one is given."""
+    logger = logging.getLogger("fmu_manipulation_toolbox")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    if handler is not None:
+        logger.addHandler(handler)
+    try:
+        yield
+    finally:
+        if handler is not None:
+            logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
 def checker_problems(fmu: str | Path) -> list[str]:
     """Problems fmu-manipulation-toolbox's checkers (those of ``fmutool -check``) find in a FMU's
     model description (empty list: valid)."""
     from fmu_manipulation_toolbox.checker import get_checkers
     from fmu_manipulation_toolbox.operations import FMU, FMUError
 
-    logger = logging.getLogger("fmu_manipulation_toolbox")
-    errors, level = _Errors(), logger.level
-    logger.addHandler(errors)
-    logger.setLevel(logging.ERROR)                    # its INFO lines are a console tool's
-    try:
-        with FMU(str(fmu)) as opened:
-            for checker in get_checkers():
-                opened.apply_operation(checker())
-    except FMUError as exc:
-        errors.messages.append(f"cannot be read: {exc}")
-    finally:
-        logger.removeHandler(errors)
-        logger.setLevel(level)
+    errors = _Errors()
+    with toolbox_errors_only(errors):
+        try:
+            with FMU(str(fmu)) as opened:
+                for checker in get_checkers():
+                    opened.apply_operation(checker())
+        except FMUError as exc:
+            errors.messages.append(f"cannot be read: {exc}")
     return errors.messages
 
 

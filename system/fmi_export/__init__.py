@@ -28,7 +28,16 @@ comment says exactly what it changes; in short:
   fmi2SetReal of inputs, fmi2GetReal, fmi2GetBoolean and fmi2DoStep of an initialized
   instance without pythonfmu's per-call Python lists; every other call, and any with a value reference it does not serve,
   still goes to pythonfmu. ``ROBOFMU_FMI_FAST_PATH=0`` in the environment at instantiation
-  switches it off.
+  switches it off;
+- the Python runtime: a host that is not Python needs no preloading; the library loads the
+  libpython this build records in each FMU (``resources/robofmu_python.txt``,
+  :func:`runtime_record`) and starts it as the recorded program (``ROBOFMU_LIBPYTHON`` and
+  ``ROBOFMU_PYTHON`` override);
+- no segfault path: a missing resource folder, and any call after the interpreter was
+  finalized, are refused before they reach pythonfmu.
+
+A FMU carries binaries for Linux x86_64 only (``binaries/linux64``): pythonfmu's ``win64`` DLL
+would run the FMU without this library, so :func:`install` drops it.
 """
 from __future__ import annotations
 
@@ -40,12 +49,14 @@ import shlex
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree
 
-__all__ = ["STATUS_CATEGORY", "STOCK_LIBRARY", "FmiExportError", "library", "install", "installed"]
+__all__ = ["MARKER", "RUNTIME_RECORD", "STATUS_CATEGORY", "STOCK_LIBRARY", "FmiExportError", "library", "install", "installed",
+           "read_runtime", "runtime_record"]
 
 SOURCE = Path(__file__).resolve().parent / "robofmu_fmi2.c"
 #: A message logged with this category sets the status of the FMI call it is logged in.
@@ -53,8 +64,13 @@ STATUS_CATEGORY = "robofmu:status"
 #: pythonfmu's export library, beside robofmu's in ``binaries/linux64``.
 STOCK_LIBRARY = "libpythonfmu-export.so"
 PLATFORM = "linux64"
+#: What robofmu's library answers from its marker export ``robofmu_fmi_library()``.
+MARKER = "robofmu FMI 2.0 export library"
+#: The Python runtime a FMU was built for, in its resources (``key=value`` lines: version,
+#: program, library); the C library reads it (``robofmu_fmi2.c``: RUNTIME_RECORD).
+RUNTIME_RECORD = "robofmu_python.txt"
 _FLAGS = ["-shared", "-fPIC", "-O2", "-Wall", "-fvisibility=hidden"]
-_LIBS = ["-ldl"]
+_LIBS = ["-ldl", "-pthread"]
 
 
 class FmiExportError(RuntimeError):
@@ -136,12 +152,57 @@ def library(log=None) -> Path:
     return target
 
 
+def runtime_record() -> dict[str, str]:
+    """The Python runtime of this process, as a FMU built here records it.
+
+    Returns
+    -------
+    dict
+        ``version`` (``"3.11"``), ``program`` (this interpreter's program, not resolved: a
+        venv's ``bin/python`` makes the embedded interpreter find that venv) and ``library``
+        (the full path of its libpython, ``""`` if it was built without one).
+    """
+    library = ""
+    if sysconfig.get_config_var("Py_ENABLE_SHARED"):
+        folder = Path(sysconfig.get_config_var("LIBDIR") or "")
+        for name in (sysconfig.get_config_var("INSTSONAME"), sysconfig.get_config_var("LDLIBRARY")):
+            if name and (folder / name).is_file():
+                library = str(folder / name)
+                break
+    return {"version": f"{sys.version_info.major}.{sys.version_info.minor}", "program": sys.executable,
+            "library": library}
+
+
+def _record_text(record: dict[str, str]) -> str:
+    return ("# The Python runtime this FMU was built for (robofmu build). A host that is not Python\n"
+            "# loads `library` and starts it as `program`; ROBOFMU_LIBPYTHON and ROBOFMU_PYTHON override.\n"
+            + "".join(f"{key}={record[key]}\n" for key in ("version", "program", "library")))
+
+
+def read_runtime(fmu: str | Path) -> dict[str, str] | None:
+    """The runtime record in ``fmu`` (a .fmu file), or None if it has none."""
+    with zipfile.ZipFile(fmu) as z:
+        try:
+            text = z.read(f"resources/{RUNTIME_RECORD}").decode()
+        except KeyError:
+            return None
+    return dict(line.split("=", 1) for line in text.splitlines() if "=" in line and not line.startswith("#"))
+
+
 def _model_identifier(fmu: zipfile.ZipFile, path: Path) -> str:
     root = ElementTree.fromstring(fmu.read("modelDescription.xml"))
     node = root.find("CoSimulation")
     if node is None or not node.get("modelIdentifier"):
         raise FmiExportError(f"{path}: modelDescription.xml names no co-simulation model identifier")
     return node.get("modelIdentifier")
+
+
+def _beside(info: zipfile.ZipInfo, name: str) -> zipfile.ZipInfo:
+    """A new archive entry ``name`` with the date and attributes of ``info``."""
+    entry = zipfile.ZipInfo(name, date_time=info.date_time)
+    entry.compress_type = info.compress_type
+    entry.external_attr = info.external_attr
+    return entry
 
 
 def installed(fmu: str | Path) -> bool:
@@ -155,6 +216,10 @@ def install(fmu: str | Path, ours: Path | None = None) -> None:
 
     ``binaries/linux64/<modelIdentifier>.so`` (pythonfmu's library, renamed by its builder)
     moves to ``binaries/linux64/libpythonfmu-export.so``; robofmu's library takes its name.
+    The binaries pythonfmu ships for other platforms (``binaries/win64``: its own DLL, which
+    would run the FMU without robofmu's library) are dropped: a FMU carries binaries only for
+    the platforms robofmu's library is built for. ``resources/robofmu_python.txt`` records
+    this process's Python runtime (:func:`runtime_record`), for hosts that are not Python.
     """
     path = Path(fmu)
     ours = library() if ours is None else Path(ours)
@@ -179,12 +244,13 @@ def install(fmu: str | Path, ours: Path | None = None) -> None:
             for info, data in entries:
                 if info.filename == entry:
                     out.writestr(info, ours.read_bytes())
-                    moved = zipfile.ZipInfo(stock_entry, date_time=info.date_time)
-                    moved.compress_type = info.compress_type
-                    moved.external_attr = info.external_attr
-                    out.writestr(moved, stock)
+                    out.writestr(_beside(info, stock_entry), stock)
+                elif info.filename.startswith("binaries/") and not info.filename.startswith(f"binaries/{PLATFORM}/"):
+                    continue
                 else:
                     out.writestr(info, data)
+                    if info.filename == "resources/slavemodule.txt":
+                        out.writestr(_beside(info, f"resources/{RUNTIME_RECORD}"), _record_text(runtime_record()))
         os.replace(partial, path)
     finally:
         partial.unlink(missing_ok=True)

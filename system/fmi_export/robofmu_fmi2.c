@@ -83,15 +83,44 @@
       robofmu_fast_path(c) says whether an instance registered, robofmu_fast_calls(c) how many
       calls it served.
 
+   5. The Python runtime. pythonfmu's library resolves Python's symbols from the process and
+      fails to load without them ("undefined symbol: _Py_NoneStruct"), and the interpreter it
+      starts finds its standard library and packages from the first python3 on PATH. So this
+      layer loads pythonfmu's library at the first fmi2Instantiate, not when it is loaded
+      itself, after making sure of the runtime, from the FMU's resources/robofmu_python.txt
+      (version, program, library: written by robofmu build; the environment variables
+      ROBOFMU_LIBPYTHON and ROBOFMU_PYTHON override library and program):
+      - no Python in the process (a host that is not Python): the recorded libpython is loaded
+        by its full path with RTLD_NOW | RTLD_GLOBAL;
+      - the running Python (Py_GetVersion) must be the recorded version: pythonfmu's library is
+        compiled for one;
+      - if the interpreter is not initialized yet, it is told it is the recorded program
+        (Py_SetProgramName: a venv's bin/python makes it find that venv), before pythonfmu's
+        library initializes it.
+      A failure returns NULL from fmi2Instantiate with a message that names what is missing and
+      `robofmu doctor`.
+   6. Calls no host should crash on:
+      - fmi2Instantiate checks fmuResourceLocation (file:///path, file:/path,
+        file://localhost/path, percent-encoded) names a readable folder holding
+        slavemodule.txt, and hands pythonfmu the form it parses ("file://" and the path, spaces
+        as %20); else it returns NULL with a message (pythonfmu would call a NULL class);
+      - once an instance was made, a call after the interpreter was finalized (exit handlers,
+        C++ static destructors: OMSimulator frees its FMUs so) reaches no Python: every call
+        answers fmi2Error, fmi2Instantiate NULL, with no message (a Python host's logger is
+        Python), and fmi2FreeInstance releases this layer's part only (the slave went with
+        the interpreter).
+
    Everything else is pythonfmu's, fmi2Fatal after a Python exception included (robofmu's
    slave lets none reach it: it fails calls through point 1). Only the fast path (point 4)
-   uses Python's API, resolved at run time. */
+   and the runtime (point 5) use Python's API, resolved at run time. */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <elf.h>
+#include <errno.h>
 #include <fcntl.h>
 #include <link.h>
 #include <math.h>
+#include <pthread.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -100,6 +129,7 @@
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <wchar.h>
 
 #define EXPORT __attribute__((visibility("default")))
 #define STOCK_LIBRARY "libpythonfmu-export.so"
@@ -182,8 +212,7 @@ static struct {
 #undef FIELD
 } stock;
 
-static void* stock_handle = NULL;
-static char load_error[8192] = "not loaded";
+static void* stock_handle = NULL;        /* loaded by the first fmi2Instantiate */
 
 /* -- pythonfmu's state at process exit (point 3 of the header comment) ------------------------ */
 extern int __cxa_atexit(void (*function)(void*), void* argument, void* dso_handle);
@@ -259,40 +288,42 @@ static void guard_stock_exit(void* handle, const char* path)
     if (dso != NULL) __cxa_atexit(finalize, NULL, dso);
 }
 
-__attribute__((constructor)) static void load_stock(void)
+/* pythonfmu's library, from the folder of this one: 1, or 0 with the reason in `error`. Its
+   Python symbols must be in the process already (ensure_runtime). */
+static int load_stock(char* error, size_t size)
 {
     Dl_info self;
     if (!dladdr((void*)&load_stock, &self) || self.dli_fname == NULL) {
-        snprintf(load_error, sizeof load_error, "cannot find the folder of this library");
-        return;
+        snprintf(error, size, "cannot find the folder of this library");
+        return 0;
     }
     const char* slash = strrchr(self.dli_fname, '/');
     size_t dir = slash ? (size_t)(slash - self.dli_fname) + 1 : 0;
     char path[4096];
     if (dir + sizeof STOCK_LIBRARY > sizeof path) {
-        snprintf(load_error, sizeof load_error, "the path of %.4000s is too long", self.dli_fname);
-        return;
+        snprintf(error, size, "the path of %.4000s is too long", self.dli_fname);
+        return 0;
     }
     memcpy(path, self.dli_fname, dir);
     memcpy(path + dir, STOCK_LIBRARY, sizeof STOCK_LIBRARY);
     void* handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (handle == NULL) {
         const char* why = dlerror();
-        snprintf(load_error, sizeof load_error, "cannot load %.4000s: %.3000s", path, why ? why : "unknown error");
-        return;
+        snprintf(error, size, "cannot load %.4000s: %.3000s", path, why ? why : "unknown error");
+        return 0;
     }
 #define RESOLVE(ret, name, params)                                                            \
     *(void**)(&stock.name) = dlsym(handle, #name);                                            \
     if (stock.name == NULL) {                                                                 \
-        snprintf(load_error, sizeof load_error, "%.4000s lacks the function %s", path, #name);     \
+        snprintf(error, size, "%.4000s lacks the function %s", path, #name);                  \
         dlclose(handle);                                                                      \
-        return;                                                                               \
+        return 0;                                                                             \
     }
     STOCK_FUNCTIONS(RESOLVE)
 #undef RESOLVE
     guard_stock_exit(handle, path);
     stock_handle = handle;
-    load_error[0] = '\0';
+    return 1;
 }
 
 __attribute__((destructor)) static void unload_stock(void)
@@ -542,7 +573,7 @@ static fmi2Status finish(const Instance* in, fmi2Status s)
 
 #define ENTER(c)                                              \
     Instance* in = (Instance*)(c);                            \
-    if (in == NULL) return fmi2Error;                         \
+    if (in == NULL || python_gone()) return fmi2Error;        \
     in->requested = fmi2OK
 
 /* -- the fast path (point 4 of the header comment) ------------------------------------------- */
@@ -664,6 +695,12 @@ static void note_step(Instance* in, fmi2Status stock_status, fmi2Real t, fmi2Rea
     }
 }
 
+/* The marker of this library: a FMU's binary is robofmu's, not pythonfmu's (tests, doctor). */
+EXPORT const char* robofmu_fmi_library(void)
+{
+    return "robofmu FMI 2.0 export library";
+}
+
 /* Whether instance c is served by the fast path (its slave registered). */
 EXPORT int robofmu_fast_path(fmi2Component c)
 {
@@ -676,6 +713,202 @@ EXPORT unsigned long long robofmu_fast_calls(fmi2Component c)
     return c != NULL ? ((Instance*)c)->fast_calls : 0;
 }
 
+/* -- the resource folder and the Python runtime (points 5 and 6 of the header comment) ----- */
+#define RUNTIME_RECORD "robofmu_python.txt"
+
+static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
+static int (*py_is_initialized)(void) = NULL;   /* Py_IsInitialized, once a runtime is in the process */
+static int python_seen = 0;                     /* an instance was made: Python was initialized */
+
+/* Whether the interpreter the instances live in has been finalized (process exit, static
+   destructors): then no call may reach pythonfmu, whose every call enters Python. */
+static int python_gone(void)
+{
+    return __atomic_load_n(&python_seen, __ATOMIC_ACQUIRE) && py_is_initialized != NULL
+        && !py_is_initialized();
+}
+
+static int hex_digit(char c)
+{
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+/* fmuResourceLocation (file:///path, file:/path, file://localhost/path, percent-encoded) as
+   a folder path that exists and holds pythonfmu's resources/slavemodule.txt: 1, else 0 with
+   the reason. */
+static int resource_folder(fmi2String uri, char* path, size_t size, char* error, size_t error_size)
+{
+    if (uri == NULL || uri[0] == '\0') {
+        snprintf(error, error_size, "fmuResourceLocation is %s", uri == NULL ? "NULL" : "empty");
+        return 0;
+    }
+    const char* p = uri;
+    if (strncmp(p, "file://localhost/", 17) == 0) {
+        p += 16;
+    } else if (strncmp(p, "file:///", 8) == 0) {
+        p += 7;
+    } else if (strncmp(p, "file:/", 6) == 0 && p[6] != '/') {
+        p += 5;
+    } else {
+        snprintf(error, error_size, "fmuResourceLocation \"%.4000s\" is not a file URI of this machine "
+                 "(file:///absolute/path)", uri);
+        return 0;
+    }
+    size_t n = 0;
+    for (; *p != '\0'; ++p) {
+        char c = *p;
+        if (c == '%' && hex_digit(p[1]) >= 0 && hex_digit(p[2]) >= 0) {
+            c = (char)(hex_digit(p[1]) * 16 + hex_digit(p[2]));
+            p += 2;
+        }
+        if (n + 1 >= size || c == '\0') {
+            snprintf(error, error_size, "fmuResourceLocation \"%.4000s\" is too long or holds %%00", uri);
+            return 0;
+        }
+        path[n++] = c;
+    }
+    while (n > 1 && path[n - 1] == '/') --n;
+    path[n] = '\0';
+    char module[sizeof "/slavemodule.txt" + 4096];
+    struct stat st;
+    if (stat(path, &st) != 0 || !S_ISDIR(st.st_mode) || access(path, R_OK | X_OK) != 0) {
+        snprintf(error, error_size, "%.4000s (from fmuResourceLocation \"%.2000s\") %s", path, uri,
+                 stat(path, &st) != 0 ? "does not exist" : !S_ISDIR(st.st_mode) ? "is not a folder"
+                                                          : "cannot be read");
+        return 0;
+    }
+    snprintf(module, sizeof module, "%.4000s/slavemodule.txt", path);
+    if (access(module, R_OK) != 0) {
+        snprintf(error, error_size, "%.4000s cannot be read (%s): the resource folder is not this FMU's "
+                 "(fmuResourceLocation \"%.2000s\")", module, strerror(errno), uri);
+        return 0;
+    }
+    return 1;
+}
+
+/* The folder as pythonfmu takes it: "file://" and the path, with only spaces encoded. */
+static void stock_uri(const char* path, char* uri, size_t size)
+{
+    size_t n = (size_t)snprintf(uri, size, "file://");
+    for (const char* p = path; *p != '\0' && n + 4 < size; ++p) {
+        if (*p == ' ') {
+            memcpy(uri + n, "%20", 3);
+            n += 3;
+        } else {
+            uri[n++] = *p;
+        }
+    }
+    uri[n] = '\0';
+}
+
+typedef struct {
+    char version[64];           /* "3.11" */
+    char program[4096];         /* the interpreter the FMU was built with (a venv's bin/python) */
+    char library[4096];         /* its libpython, full path; empty: built without one */
+} Runtime;
+
+static void copy_value(char* to, size_t size, const char* value)
+{
+    snprintf(to, size, "%s", value);
+}
+
+/* resources/robofmu_python.txt (key=value lines, written by robofmu build), then the
+   environment's ROBOFMU_PYTHON and ROBOFMU_LIBPYTHON over it. 1 if the record was read. */
+static int read_runtime(const char* resources, Runtime* rt)
+{
+    memset(rt, 0, sizeof *rt);
+    char path[4096 + sizeof RUNTIME_RECORD + 2];
+    snprintf(path, sizeof path, "%.4096s/%s", resources, RUNTIME_RECORD);
+    FILE* f = fopen(path, "r");
+    if (f != NULL) {
+        char line[8192];
+        while (fgets(line, sizeof line, f) != NULL) {
+            line[strcspn(line, "\r\n")] = '\0';
+            char* eq = strchr(line, '=');
+            if (line[0] == '#' || eq == NULL) continue;
+            *eq = '\0';
+            if (strcmp(line, "version") == 0) copy_value(rt->version, sizeof rt->version, eq + 1);
+            else if (strcmp(line, "program") == 0) copy_value(rt->program, sizeof rt->program, eq + 1);
+            else if (strcmp(line, "library") == 0) copy_value(rt->library, sizeof rt->library, eq + 1);
+        }
+        fclose(f);
+    }
+    const char* program = getenv("ROBOFMU_PYTHON");
+    const char* library = getenv("ROBOFMU_LIBPYTHON");
+    if (program != NULL && program[0] != '\0') copy_value(rt->program, sizeof rt->program, program);
+    if (library != NULL && library[0] != '\0') copy_value(rt->library, sizeof rt->library, library);
+    return f != NULL;
+}
+
+#define DOCTOR "run `robofmu doctor --fmus FOLDER` with the robofmu that built the FMU, or set " \
+               "ROBOFMU_LIBPYTHON (a libpython shared library) and ROBOFMU_PYTHON (the python program " \
+               "of an environment with the FMU's resources/requirements.txt)"
+
+/* A Python runtime in the process, of the version the FMU was built for, told which program it
+   is if it is not running yet: 1, or 0 with the reason. Called with load_lock held. */
+static int ensure_runtime(const char* resources, char* error, size_t size)
+{
+    Runtime rt;
+    int recorded = read_runtime(resources, &rt);
+    void* is_initialized = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (is_initialized == NULL) {                       /* a host that is not Python: load it */
+        if (rt.library[0] == '\0') {
+            snprintf(error, size, "no Python in this process and %s; %s",
+                     recorded ? "the FMU records no libpython (its Python was built without one)"
+                              : "no " RUNTIME_RECORD " in the FMU's resources to say which", DOCTOR);
+            return 0;
+        }
+        void* library = dlopen(rt.library, RTLD_NOW | RTLD_GLOBAL);
+        if (library == NULL) {
+            const char* why = dlerror();
+            snprintf(error, size, "cannot load the Python runtime %.2000s: %.2000s; %s", rt.library,
+                     why ? why : "unknown error", DOCTOR);
+            return 0;
+        }
+        is_initialized = dlsym(library, "Py_IsInitialized");
+        if (is_initialized == NULL) {
+            snprintf(error, size, "%.4000s is not a Python runtime (no Py_IsInitialized); %s", rt.library, DOCTOR);
+            return 0;
+        }
+    }
+    *(void**)(&py_is_initialized) = is_initialized;
+    const char* (*get_version)(void);
+    *(void**)(&get_version) = dlsym(RTLD_DEFAULT, "Py_GetVersion");
+    if (rt.version[0] != '\0' && get_version != NULL) {
+        const char* running = get_version();
+        size_t n = strlen(rt.version);
+        if (running == NULL || strncmp(running, rt.version, n) != 0 || (running[n] != '.' && running[n] != ' ')) {
+            if (running == NULL) running = "?";
+            snprintf(error, size, "this process runs Python %.*s, the FMU was built for Python %s "
+                     "(pythonfmu's library is compiled for one Python version); %s",
+                     (int)strcspn(running, " "), running, rt.version, DOCTOR);
+            return 0;
+        }
+    }
+    if (!py_is_initialized() && rt.program[0] != '\0') {
+        /* pythonfmu starts the interpreter: it finds its standard library and packages from
+           the program it is told it is (a venv's python: that venv), not from PATH. */
+        if (access(rt.program, X_OK) != 0) {
+            snprintf(error, size, "the Python program %.4000s is not there (%s); %s", rt.program,
+                     strerror(errno), DOCTOR);
+            return 0;
+        }
+        wchar_t* (*decode)(const char*, size_t*);
+        void (*set_program_name)(const wchar_t*);
+        *(void**)(&decode) = dlsym(RTLD_DEFAULT, "Py_DecodeLocale");
+        *(void**)(&set_program_name) = dlsym(RTLD_DEFAULT, "Py_SetProgramName");
+        static wchar_t* program = NULL;                 /* Python keeps the pointer */
+        if (decode != NULL && set_program_name != NULL && program == NULL) {
+            program = decode(rt.program, NULL);
+            if (program != NULL) set_program_name(program);
+        }
+    }
+    return 1;
+}
+
 /* -- FMI 2.0 functions ----------------------------------------------------------------------- */
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
@@ -684,13 +917,28 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
                                      fmi2Boolean visible, fmi2Boolean loggingOn)
 {
-    if (functions == NULL) return NULL;
-    if (stock_handle == NULL) {
-        char text[sizeof load_error + 64];
-        snprintf(text, sizeof text, "robofmu: cannot instantiate: pythonfmu's export library: %s", load_error);
-        emit(functions, instanceName, fmi2Fatal, category_of_status(fmi2Fatal), text);
+    if (functions == NULL || python_gone()) return NULL;    /* nothing to log with, or no Python */
+    char resources[4096], error[8192];
+    const char* refused = NULL;
+    if (!resource_folder(fmuResourceLocation, resources, sizeof resources, error, sizeof error)) {
+        refused = "the FMU's resource folder";
+    } else {
+        pthread_mutex_lock(&load_lock);
+        if (!ensure_runtime(resources, error, sizeof error)) {
+            refused = "the Python runtime";
+        } else if (stock_handle == NULL && !load_stock(error, sizeof error)) {
+            refused = "pythonfmu's export library";
+        }
+        pthread_mutex_unlock(&load_lock);
+    }
+    if (refused != NULL) {
+        char text[sizeof error + 256];
+        snprintf(text, sizeof text, "fmi2Instantiate: cannot instantiate, %s: %s", refused, error);
+        emit(functions, instanceName, fmi2Error, category_of_status(fmi2Error), text);
         return NULL;
     }
+    char uri[sizeof resources * 3 + 16];
+    stock_uri(resources, uri, sizeof uri);
     Instance* in = calloc(1, sizeof *in);
     if (in == NULL) return NULL;
     in->outer = functions;
@@ -701,15 +949,15 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     in->name = strdup(instanceName ? instanceName : "");
     in->last_successful_time = NAN;     /* pythonfmu's start values */
     Fast pending = FAST_NONE;
-    WHILE_REGISTERING(pending, in->stock = stock.fmi2Instantiate(instanceName, fmuType, fmuGUID,
-                                                                 fmuResourceLocation, &in->inner,
-                                                                 visible, fmi2True));
+    WHILE_REGISTERING(pending, in->stock = stock.fmi2Instantiate(instanceName, fmuType, fmuGUID, uri,
+                                                                 &in->inner, visible, fmi2True));
     if (in->stock == NULL) {            /* pythonfmu has logged why (fmi2Fatal: always shown) */
         fast_release(&pending);
         free(in->name);
         free(in);
         return NULL;
     }
+    __atomic_store_n(&python_seen, 1, __ATOMIC_RELEASE);
     in->fast = pending;
     return in;
 }
@@ -718,8 +966,10 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     Instance* in = (Instance*)c;
     if (in == NULL) return;
-    fast_release(&in->fast);            /* before pythonfmu releases the slave */
-    stock.fmi2FreeInstance(in->stock);
+    if (!python_gone()) {               /* else its Python objects went with the interpreter */
+        fast_release(&in->fast);        /* before pythonfmu releases the slave */
+        stock.fmi2FreeInstance(in->stock);
+    }
     free_categories(in);
     free(in->name);
     free(in);

@@ -244,3 +244,57 @@ def test_every_platform_binary_exports_the_fmi_functions_and_robofmus_marker(fmu
     import pythonfmu
     stock = (Path(pythonfmu.__file__).parent / "resources" / "binaries" / "linux64" / fmi_export.STOCK_LIBRARY).read_bytes()
     assert "robofmu_fmi_library" not in elf_exports(stock) and "fmi2DoStep" in elf_exports(stock)
+
+
+def elf_version_needs(data: bytes) -> dict[str, set[str]]:
+    """The symbol versions an ELF64 little-endian library needs, by library (its .gnu.version_r)."""
+    import struct
+
+    shoff, = struct.unpack_from("<Q", data, 0x28)
+    shentsize, shnum = struct.unpack_from("<HH", data, 0x3A)
+    sections = [struct.unpack_from("<IIQQQQIIQQ", data, shoff + k * shentsize) for k in range(shnum)]
+    string = lambda base, at: data[base + at:data.index(b"\0", base + at)].decode()
+    needs: dict[str, set[str]] = {}
+    for _, kind, _, _, offset, _, link, count, _, _ in sections:
+        if kind != 0x6FFFFFFE:                                      # SHT_GNU_verneed
+            continue
+        strings = sections[link][4]
+        entry = offset
+        for _ in range(count):
+            _, n_aux, file, aux, following = struct.unpack_from("<HHIII", data, entry)
+            versions = needs.setdefault(string(strings, file), set())
+            at = entry + aux
+            for _ in range(n_aux):
+                _, _, _, name, next_aux = struct.unpack_from("<IHHII", data, at)
+                versions.add(string(strings, name))
+                at += next_aux
+            entry += following
+    return needs
+
+
+def test_the_library_needs_no_glibc_newer_than_the_baseline(fmu_root, tmp_path):
+    """Built by Zig (the dev extra) against glibc 2.17: FMUs built here load on older
+    distributions (pythonfmu's own library, beside it, needs 2.32 at most)."""
+    import os
+    import zipfile
+
+    if os.environ.get("CC"):
+        pytest.skip(f"CC={os.environ['CC']} builds the library, not Zig")
+    assert "ziglang" in fmi_export._compiler()
+    baseline = tuple(map(int, fmi_export.GLIBC_BASELINE.split(".")))
+    path = fmu_root / "chess" / "plant.fmu"
+    identifier = read_model_description(str(path), validate=False).coSimulation.modelIdentifier
+    with zipfile.ZipFile(path) as archive:
+        needs = elf_version_needs(archive.read(f"binaries/linux64/{identifier}.so"))
+    glibc = {v for versions in needs.values() for v in versions if v.startswith("GLIBC_")}
+    assert glibc, needs                                         # the reader found them
+    newest = max(tuple(map(int, v[len("GLIBC_"):].split("."))) for v in glibc)
+    assert newest <= baseline, sorted(glibc)
+    # negative control: the machine's compiler links dlopen and pthread at glibc 2.34 (Debian 12),
+    # which the reader sees as newer than the baseline
+    if shutil.which("cc"):
+        built = tmp_path / "native.so"
+        subprocess.run(["cc", "-shared", "-fPIC", "-o", str(built), str(fmi_export.SOURCE), "-ldl", "-pthread"],
+                       check=True, capture_output=True)
+        native = {v for vs in elf_version_needs(built.read_bytes()).values() for v in vs if v.startswith("GLIBC_")}
+        assert max(tuple(map(int, v[len("GLIBC_"):].split("."))) for v in native) > baseline, sorted(native)

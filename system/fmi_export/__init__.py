@@ -42,6 +42,7 @@ would run the FMU without this library, so :func:`install` drops it.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
 import platform
 import re
@@ -85,9 +86,19 @@ def forwarded_functions() -> list[str]:
     return names
 
 
+#: The glibc the library is built against when Zig builds it (``ziglang``, the dev extra): the
+#: FMUs then load on distributions back to it (pythonfmu's own library needs glibc 2.32).
+GLIBC_BASELINE = "2.17"
+
+
 def _compiler() -> list[str]:
+    """The C compiler: ``$CC``; else Zig's (``python -m ziglang cc``, if installed) for
+    x86_64 Linux against glibc :data:`GLIBC_BASELINE`; else the machine's cc, gcc or clang (the
+    library then needs this machine's glibc, 2.34 on a current distribution)."""
     if os.environ.get("CC"):
         return shlex.split(os.environ["CC"])
+    if importlib.util.find_spec("ziglang") is not None:
+        return [sys.executable, "-m", "ziglang", "cc", "-target", f"x86_64-linux-gnu.{GLIBC_BASELINE}"]
     for name in ("cc", "gcc", "clang"):
         path = shutil.which(name)
         if path:

@@ -26,6 +26,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
+import elf
 from robofmu.system import fmi_export
 
 SOURCES = Path(__file__).resolve().parent / "c_host"
@@ -198,26 +199,6 @@ FMI2_COSIMULATION = """fmi2GetTypesPlatform fmi2GetVersion fmi2SetDebugLogging f
     fmi2GetIntegerStatus fmi2GetBooleanStatus fmi2GetStringStatus""".split()
 
 
-def elf_exports(data: bytes) -> set[str]:
-    """The defined global functions of an ELF64 little-endian shared library (its .dynsym)."""
-    import struct
-
-    assert data[:4] == b"\x7fELF" and data[4] == 2 and data[5] == 1, "not an ELF64 little-endian file"
-    shoff, = struct.unpack_from("<Q", data, 0x28)
-    shentsize, shnum = struct.unpack_from("<HH", data, 0x3A)
-    sections = [struct.unpack_from("<IIQQQQIIQQ", data, shoff + k * shentsize) for k in range(shnum)]
-    names = set()
-    for _, kind, _, _, offset, size, link, _, _, entsize in sections:
-        if kind != 11:                                              # SHT_DYNSYM
-            continue
-        strings = sections[link][4]
-        for k in range(size // entsize):
-            name, info, _, shndx, _, _ = struct.unpack_from("<IBBHQQ", data, offset + k * entsize)
-            if shndx != 0 and info >> 4 == 1 and info & 0xF == 2:   # defined, STB_GLOBAL, STT_FUNC
-                names.add(data[strings + name:data.index(b"\0", strings + name)].decode())
-    return names
-
-
 def test_every_platform_binary_exports_the_fmi_functions_and_robofmus_marker(fmu_root, tmp_path):
     import ctypes
     import zipfile
@@ -229,7 +210,7 @@ def test_every_platform_binary_exports_the_fmi_functions_and_robofmus_marker(fmu
         with zipfile.ZipFile(path) as archive:
             platforms = {n.split("/")[1] for n in archive.namelist() if n.startswith("binaries/")}
             assert platforms == {"linux64"}, (path, platforms)      # the only platform robofmu's library is built for
-            exports = elf_exports(archive.read(f"binaries/linux64/{identifier}.so"))
+            exports = elf.exports(archive.read(f"binaries/linux64/{identifier}.so"))
         assert set(FMI2_COSIMULATION) <= exports, (path, set(FMI2_COSIMULATION) - exports)
         assert {"robofmu_fmi_library", "robofmu_fast_register"} <= exports, path
     # the marker answers, from a copy loaded on its own (pythonfmu's library is loaded later, by fmi2Instantiate)
@@ -243,33 +224,7 @@ def test_every_platform_binary_exports_the_fmi_functions_and_robofmus_marker(fmu
     # pythonfmu's own library has no marker: the check tells the two apart
     import pythonfmu
     stock = (Path(pythonfmu.__file__).parent / "resources" / "binaries" / "linux64" / fmi_export.STOCK_LIBRARY).read_bytes()
-    assert "robofmu_fmi_library" not in elf_exports(stock) and "fmi2DoStep" in elf_exports(stock)
-
-
-def elf_version_needs(data: bytes) -> dict[str, set[str]]:
-    """The symbol versions an ELF64 little-endian library needs, by library (its .gnu.version_r)."""
-    import struct
-
-    shoff, = struct.unpack_from("<Q", data, 0x28)
-    shentsize, shnum = struct.unpack_from("<HH", data, 0x3A)
-    sections = [struct.unpack_from("<IIQQQQIIQQ", data, shoff + k * shentsize) for k in range(shnum)]
-    string = lambda base, at: data[base + at:data.index(b"\0", base + at)].decode()
-    needs: dict[str, set[str]] = {}
-    for _, kind, _, _, offset, _, link, count, _, _ in sections:
-        if kind != 0x6FFFFFFE:                                      # SHT_GNU_verneed
-            continue
-        strings = sections[link][4]
-        entry = offset
-        for _ in range(count):
-            _, n_aux, file, aux, following = struct.unpack_from("<HHIII", data, entry)
-            versions = needs.setdefault(string(strings, file), set())
-            at = entry + aux
-            for _ in range(n_aux):
-                _, _, _, name, next_aux = struct.unpack_from("<IHHII", data, at)
-                versions.add(string(strings, name))
-                at += next_aux
-            entry += following
-    return needs
+    assert "robofmu_fmi_library" not in elf.exports(stock) and "fmi2DoStep" in elf.exports(stock)
 
 
 def test_the_library_needs_no_glibc_newer_than_the_baseline(fmu_root, tmp_path):
@@ -285,7 +240,7 @@ def test_the_library_needs_no_glibc_newer_than_the_baseline(fmu_root, tmp_path):
     path = fmu_root / "chess" / "plant.fmu"
     identifier = read_model_description(str(path), validate=False).coSimulation.modelIdentifier
     with zipfile.ZipFile(path) as archive:
-        needs = elf_version_needs(archive.read(f"binaries/linux64/{identifier}.so"))
+        needs = elf.version_needs(archive.read(f"binaries/linux64/{identifier}.so"))
     glibc = {v for versions in needs.values() for v in versions if v.startswith("GLIBC_")}
     assert glibc, needs                                         # the reader found them
     newest = max(tuple(map(int, v[len("GLIBC_"):].split("."))) for v in glibc)
@@ -296,5 +251,5 @@ def test_the_library_needs_no_glibc_newer_than_the_baseline(fmu_root, tmp_path):
         built = tmp_path / "native.so"
         subprocess.run(["cc", "-shared", "-fPIC", "-o", str(built), str(fmi_export.SOURCE), "-ldl", "-pthread"],
                        check=True, capture_output=True)
-        native = {v for vs in elf_version_needs(built.read_bytes()).values() for v in vs if v.startswith("GLIBC_")}
+        native = {v for vs in elf.version_needs(built.read_bytes()).values() for v in vs if v.startswith("GLIBC_")}
         assert max(tuple(map(int, v[len("GLIBC_"):].split("."))) for v in native) > baseline, sorted(native)

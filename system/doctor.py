@@ -2,13 +2,16 @@
 
 The FMUs run Python inside the importing process (pythonfmu's C++ layer calls the interpreter
 that is already loaded). A Python host (fmpy, libcosimpy) started from this installation's
-interpreter needs nothing else. A non-Python host (libcosim's ``cosim``) must preload this
-interpreter's libpython (``sysconfig``: ``LIBDIR`` / ``INSTSONAME``) and put the venv's ``bin``
-first on ``PATH``, so that the embedded interpreter finds this environment's packages.
+interpreter needs nothing else. A host that is not Python (fmusim, OMSimulator, libcosim's
+``cosim``, a C program) needs nothing either: each FMU records the Python it was built for in
+``resources/robofmu_python.txt`` (version, program, libpython), and robofmu's FMI library loads
+that libpython and starts it as that program (``robofmu_fmi2.c``, point 5). :func:`runtime_problems`
+checks each record as such a host would meet it, from an empty environment.
 
 The packages the FMUs need are read from robofmu's own metadata
 (``importlib.metadata.requires("robofmu")``, else ``pyproject.toml``): the run-time requirements
-whose modules the bundled ``robofmu.components`` imports (its source, read with ``ast``), but
+whose modules the bundled ``robofmu.components`` imports (its source, read with ``ast`` by
+:mod:`robofmu.system.requirements`, which also writes each FMU's requirements.txt), but
 those every FMU carries in its resources (``pythonfmu``, ``robofmu``). robofmu's other
 requirements (the master's and the analysis') are checked as installed, not imported.
 
@@ -21,7 +24,6 @@ everything checks, else 1.
 """
 from __future__ import annotations
 
-import ast
 import importlib
 import importlib.metadata as metadata
 import importlib.util
@@ -30,12 +32,14 @@ import re
 import subprocess
 import sys
 import sysconfig
-import tomllib
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["Requirement", "doctor", "environment_lines", "fmu_problems", "libpython", "requirements"]
+from .requirements import declared, needs, normalize
+
+__all__ = ["Requirement", "doctor", "fmu_problems", "libpython", "requirements", "runtime_problems"]
 
 #: Top-level packages every FMU carries in its resources (pythonfmu's builder bundles itself,
 #: ``robofmu build`` bundles robofmu.components): the importing process needs no copy.
@@ -72,12 +76,7 @@ class Requirement:
 
 def _declared() -> list[str]:
     """robofmu's run-time requirements as declared (installed metadata, else pyproject.toml)."""
-    try:
-        declared = metadata.requires("robofmu") or []
-    except metadata.PackageNotFoundError:
-        pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
-        declared = tomllib.loads(pyproject.read_text())["project"].get("dependencies", [])
-    return [r for r in declared if "extra" not in (_NAME.match(r).group(3) or "")]
+    return declared()
 
 
 def _modules_of(distribution: str) -> list[str]:
@@ -104,31 +103,30 @@ def _modules_of(distribution: str) -> list[str]:
     return names
 
 
-def _imports_of_components() -> set[str]:
-    """Top-level modules imported anywhere in the bundled ``robofmu.components`` sources."""
+def requirements() -> list[Requirement]:
+    """robofmu's run-time requirements, those the FMUs import marked :attr:`Requirement.for_fmus`.
+
+    What the FMUs import is derived as ``robofmu build`` derives their requirements.txt
+    (:func:`robofmu.system.requirements.needs` on the bundled ``robofmu.components``); a
+    distribution they import that robofmu does not declare is added, and a module that no
+    installed distribution provides is added under its own name (not installed)."""
     import robofmu.components as components
 
-    found: set[str] = set()
-    for path in Path(components.__file__).resolve().parent.rglob("*.py"):
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.Import):
-                found |= {alias.name.split(".")[0] for alias in node.names}
-            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                found.add(node.module.split(".")[0])
-    return found
-
-
-def requirements() -> list[Requirement]:
-    """robofmu's run-time requirements, those the FMUs import marked :attr:`Requirement.for_fmus`."""
-    imported = _imports_of_components() - BUNDLED
-    found = []
+    needed = needs(Path(components.__file__).resolve().parent)
+    for_fmus = {normalize(n.distribution) for n in needed if n.distribution}
+    found, listed = [], set()
     for text in _declared():
         match = _NAME.match(text)
         name, specifier = match.group(1), match.group(2)
-        modules = _modules_of(name)
-        uses = bool(set(modules) & imported) or name.replace("-", "_").lower() in imported
-        found.append(Requirement(text.split(";")[0].strip(), name, specifier, modules,
-                                 uses and name.lower() not in BUNDLED))
+        listed.add(normalize(name))
+        found.append(Requirement(text.split(";")[0].strip(), name, specifier, _modules_of(name),
+                                 normalize(name) in for_fmus and name.lower() not in BUNDLED))
+    for n in needed:
+        if n.distribution is None:
+            found.append(Requirement(n.requirement, n.requirement, "", list(n.modules), True))
+        elif normalize(n.distribution) not in listed and n.distribution.lower() not in BUNDLED:
+            found.append(Requirement(n.requirement, n.distribution, _NAME.match(n.requirement).group(2),
+                                     _modules_of(n.distribution), True))
     return found
 
 
@@ -145,14 +143,71 @@ def scripts_dir() -> Path:
     return Path(sysconfig.get_path("scripts"))
 
 
-def environment_lines() -> list[str]:
-    """The shell lines a non-Python host needs before it loads the FMUs."""
-    lines = []
-    library = libpython()
-    if library is not None:
-        lines.append(f"export LD_PRELOAD={library}")
-    lines.append(f"export PATH={scripts_dir()}:$PATH")
-    return lines
+#: Run by a FMU's recorded program in an empty environment: its libpython loads and is that
+#: Python, and the FMU's requirements import (the modules as arguments).
+_RUNTIME_CHECK = ("import ctypes, importlib, sys\n"
+                  "library = ctypes.CDLL(sys.argv[1]) if sys.argv[1] else None\n"
+                  "if library is not None:\n"
+                  "    library.Py_GetVersion.restype = ctypes.c_char_p\n"
+                  "for module in sys.argv[2:]:\n"
+                  "    importlib.import_module(module)\n"
+                  "print(library.Py_GetVersion().decode().split()[0] if library else '-')\n")
+
+
+def _record_problem(record: dict[str, str], modules: list[str], timeout: float = 120.0) -> str | None:
+    """Why a host that is not Python cannot start the runtime ``record`` names (None: it can)."""
+    library, program = record.get("library", ""), record.get("program", "")
+    if not library:
+        return "records no libpython (its Python has no shared libpython): only a Python host can load it"
+    for what, path in (("libpython", library), ("program", program)):
+        if not Path(path).is_file():
+            return f"its {what} {path} does not exist (rebuild the FMUs with an installed Python, or set " \
+                   f"ROBOFMU_{'LIBPYTHON' if what == 'libpython' else 'PYTHON'})"
+    try:
+        done = subprocess.run([program, "-c", _RUNTIME_CHECK, library, *modules], capture_output=True,
+                              text=True, timeout=timeout, env={})
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"its program {program} does not run: {exc}"
+    if done.returncode != 0:
+        lines = [line for line in done.stderr.splitlines() if line.strip()]
+        return f"its program {program}, run with no environment, fails: {lines[-1].strip() if lines else done.returncode}"
+    running = done.stdout.strip()
+    if not running.startswith(record.get("version", "?") + "."):
+        return f"its libpython {library} is Python {running}, the FMU was built for {record.get('version')}"
+    return None
+
+
+def runtime_problems(fmus: list[Path]) -> tuple[list[str], list[str]]:
+    """(ok lines, problems): whether a host that is not Python, with no environment variable,
+    can start the Python runtime each FMU records (grouped: one build records one runtime)."""
+    from .fmi_export import RUNTIME_RECORD, read_runtime
+
+    groups: dict[tuple, list[Path]] = {}
+    fine, problems = [], []
+    for path in fmus:
+        record = read_runtime(path)
+        if record is None:
+            problems.append(f"{path}: no resources/{RUNTIME_RECORD}: built by an older robofmu; "
+                            "a host that is not Python cannot load it; rebuild it (robofmu build)")
+            continue
+        with zipfile.ZipFile(path) as archive:
+            wanted = archive.read("resources/requirements.txt").decode().splitlines()
+        distributions = tuple(sorted(_NAME.match(line).group(1) for line in wanted
+                                     if line.strip() and not line.lstrip().startswith("#")))
+        groups.setdefault((tuple(sorted(record.items())), distributions), []).append(path)
+    for (items, distributions), paths in groups.items():
+        record = dict(items)
+        modules = [m for name in distributions if name.lower() not in BUNDLED
+                   for m in (_modules_of(name)[:1] or [name.replace("-", "_")])]
+        what = (f"{len(paths)} FMU{'s' * (len(paths) != 1)} recording Python {record.get('version')} "
+                f"(program {record.get('program')}, libpython {record.get('library') or '-'})")
+        trouble = _record_problem(record, modules)
+        if trouble:
+            problems.append(f"{what}: {trouble}")
+        else:
+            fine.append(f"{what}: a host that is not Python loads them with no environment variable "
+                        f"(checked from an empty environment: {', '.join(modules)} import)")
+    return fine, problems
 
 
 def _version_ok(version: str, specifier: str) -> bool | None:
@@ -295,10 +350,10 @@ def doctor(fmu_dir: str | Path = "fmus", say: Callable[[str], None] = print) -> 
     say(f"  packages    {', '.join(r.text for r in fmus) or '(none)'} (the FMUs import them); "
         f"robofmu also needs {', '.join(r.text for r in others) or 'nothing else'}")
     say("")
-    say("A Python host (fmpy, libcosimpy) run by that python needs nothing else. A non-Python host")
-    say("(e.g. libcosim's cosim) needs, in its environment:")
-    for line in environment_lines():
-        say(f"  {line}")
+    say("A Python host (fmpy, libcosimpy) run by that python needs nothing else. A host that is not")
+    say("Python (fmusim, OMSimulator, cosim, a C program) needs nothing either: each FMU records that")
+    say("python and its libpython (resources/robofmu_python.txt), and loads them itself;")
+    say("ROBOFMU_PYTHON and ROBOFMU_LIBPYTHON override the record.")
     say("")
     say("Checks:")
     fine, problems = _package_checks(required)
@@ -313,6 +368,9 @@ def doctor(fmu_dir: str | Path = "fmus", say: Callable[[str], None] = print) -> 
     fine += ok_fmus
     problems += fmu_trouble
     if good:
+        ok_runtime, runtime_trouble = runtime_problems(good)
+        fine += ok_runtime
+        problems += runtime_trouble
         trouble = step_problem(good[0])
         if trouble:
             problems.append(trouble)

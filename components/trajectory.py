@@ -53,14 +53,25 @@ class _LSPBPiece:
         self.x0 = np.asarray(x0, dtype=float)
         self.T = T
         self.tb = T - T / cruise_factor
-        with np.errstate(all="ignore"):     # extreme parameters: the trajectory block refuses them
+        with np.errstate(all="ignore"):     # extreme parameters: refused by the profiles (overflow())
             dx = np.asarray(x1, dtype=float) - self.x0
+            self.dx = dx
             self.V = cruise_factor * dx / T
             self.a = self.V / self.tb
             self.half_a = 0.5 * self.a
             self.minus_a = -self.a
             self.cruise_start = self.x0 + self.half_a * self.tb * self.tb
             self.end = self.x0 + dx
+
+    def overflow(self) -> tuple[str, int, float] | None:
+        """Why the move is not finite, or None: ``(what, axis, value)`` for the first non-finite
+        of its distance, cruise speed, acceleration or cruise start (axis 0-based)."""
+        for what, values in (("distance", self.dx), ("cruise speed", self.V), ("acceleration", self.a),
+                             ("position", self.cruise_start)):
+            bad = np.flatnonzero(~np.isfinite(values))
+            if bad.size:
+                return what, int(bad[0]), float(values[bad[0]])
+        return None
 
     def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray) -> None:
         T, tb = self.T, self.tb
@@ -114,6 +125,16 @@ def _positive(value: float, name: str, unit: str) -> float:
     if not (np.isfinite(value) and value > 0.0):
         raise ValueError(f"{name}: must be > 0 {unit}, got {value}")
     return value
+
+
+def _g(value: float) -> str:
+    """A number in a message: 6 significant digits (inf, nan as such)."""
+    return f"{float(value):.6g}"
+
+
+def _finite(*values) -> bool:
+    """Whether every number (or array) of ``values`` is finite."""
+    return all(bool(np.all(np.isfinite(v))) for v in values)
 
 
 class _Profile:
@@ -205,12 +226,25 @@ class WaypointTrajectory(_Profile):
         self.cruise_factor = float(cruise_factor)
         self.dim = w.shape[1]
         segments, t = [], 0.0
-        for i in range(k):
-            segments.append(Segment(t, t + d[i], w[i], w[i + 1], i + 1))
-            t += d[i]
-            if i < k - 1 and pause > 0.0:
-                segments.append(Segment(t, t + pause, w[i + 1], w[i + 1], 0))
-                t += pause
+        with np.errstate(all="ignore"):
+            for i in range(k):
+                segments.append(Segment(t, t + d[i], w[i], w[i + 1], i + 1))
+                if segments[-1].end == t and math.isfinite(t):
+                    raise ValueError(f"durations: move {i + 1} of {_g(d[i])} s starts at t = {_g(t)} s, where so short "
+                                     "a time is lost in rounding (the earlier durations and pauses are too long "
+                                     "beside it); give the earlier moves and pauses less time or this one more")
+                t += d[i]
+                if i < k - 1 and pause > 0.0:
+                    segments.append(Segment(t, t + pause, w[i + 1], w[i + 1], 0))
+                    if segments[-1].end == t and math.isfinite(t):
+                        raise ValueError(f"pause = {_g(pause)} s is lost in rounding at t = {_g(t)} s (the durations "
+                                         "are too long beside it); give a longer pause or shorter durations")
+                    t += pause
+        if not math.isfinite(t):
+            with np.errstate(all="ignore"):
+                total = d.sum()
+            raise ValueError(f"durations, pause: the moves ({_g(total)} s in all) and pauses ({_g(pause)} s each) "
+                             f"add up to {_g(t)} s, beyond the largest float; give shorter durations or pauses")
         self.segments = segments
         self.duration = t
         self.move_ends = np.array([s.end for s in segments if s.move])
@@ -226,6 +260,21 @@ class WaypointTrajectory(_Profile):
         self._start_list = self._starts.tolist()
         self._pieces = [_LSPBPiece(s.x0, s.x1, s.end - s.start, self.cruise_factor) if s.move else None
                         for s in segments]
+        for s, piece in zip(segments, self._pieces):
+            problem = piece.overflow() if piece is not None else None
+            if problem is not None:
+                raise ValueError(self._overflow_message(s, piece, *problem))
+
+    def _overflow_message(self, s: Segment, piece: _LSPBPiece, what: str, axis: int, value: float) -> str:
+        """Why move ``s`` overflows, naming the parameters (waypoints rows, durations)."""
+        i = s.move
+        if what == "distance":
+            return (f"waypoints: rows {i} and {i + 1} are too far apart: coordinate {axis + 1} goes from "
+                    f"{_g(s.x0[axis])} to {_g(s.x1[axis])}, a change of {_g(value)} (beyond the largest float); "
+                    "bring the waypoints closer")
+        return (f"durations: move {i} takes {_g(s.end - s.start)} s, too short for waypoints rows {i} to {i + 1} "
+                f"(coordinate {axis + 1} changes by {_g(piece.dx[axis])}): its {what} would be {_g(value)} "
+                f"(not finite); give move {i} more time (durations) or bring the waypoints closer")
 
     def snap(self, t: float) -> float:
         """``t`` moved onto a breakpoint within 1e-9 s (see :func:`snap_to`)."""
@@ -280,22 +329,40 @@ class StraightLine(_Profile):
     def __init__(self, start, direction, length: float, v_max: float, a_max: float):
         self.start = _finite_vector(start, "start")
         d = _finite_vector(direction, "direction", len(self.start))
-        norm = float(np.linalg.norm(d))
-        if norm == 0.0:
+        if not d.any():
             raise ValueError("direction: must not be the zero vector")
+        with np.errstate(all="ignore"):
+            norm = float(np.linalg.norm(d))
+            if not (math.isfinite(norm) and norm > 1e-150):     # its square overflowed or underflowed
+                d = d / np.max(np.abs(d))
+                norm = float(np.linalg.norm(d))
         self.direction = d / norm
         self.length = _positive(length, "length", "m")
         self.v_max = _positive(v_max, "v_max", "m/s")
         self.a_max = _positive(a_max, "a_max", "m/s2")
         self.dim = len(self.start)
-        if self.length >= self.v_max ** 2 / self.a_max:
+        try:
+            reach = self.v_max ** 2 / self.a_max        # the length the ramps up to v_max and down take
+        except OverflowError:
+            reach = math.inf
+        if self.length >= reach:
             self.t1 = self.v_max / self.a_max
             self.duration = self.length / self.v_max + self.t1
         else:
             self.t1 = float(np.sqrt(self.length / self.a_max))
             self.duration = 2.0 * self.t1
         self.v_peak = self.a_max * self.t1
-        self.end = self.start + self.length * self.direction
+        limits = f"length = {_g(self.length)} m, v_max = {_g(self.v_max)} m/s, a_max = {_g(self.a_max)} m/s2"
+        if not _finite(self.duration, self.t1, self.v_peak, 0.5 * self.a_max * self.t1 * self.t1):
+            raise ValueError(f"{limits}: the line would take {_g(self.duration)} s (ramps of {_g(self.t1)} s, "
+                             f"peak speed {_g(self.v_peak)} m/s), not finite; give a shorter length or larger "
+                             "v_max and a_max")
+        with np.errstate(all="ignore"):
+            self.end = self.start + self.length * self.direction
+        if not _finite(self.end):
+            k = int(np.flatnonzero(~np.isfinite(self.end))[0])
+            raise ValueError(f"start[{k + 1}] = {_g(self.start[k])} and length = {_g(self.length)} m: the end "
+                             f"point's coordinate {k + 1} would be {_g(self.end[k])} (beyond the largest float)")
         self.breakpoints = np.unique([0.0, self.t1, self.duration - self.t1, self.duration])
         self._break_list = self.breakpoints.tolist()
 
@@ -352,15 +419,37 @@ class SynchronizedBangBang(_Profile):
         if bad.size:
             raise ValueError(f"a_max[{bad[0] + 1}]: must be > 0, got {a[bad[0]]}")
         self.a_max = a
-        delta = self.q_end - self.q_start
-        self.t_min = 2.0 * np.sqrt(np.abs(delta) / a)
+        with np.errstate(all="ignore"):
+            delta = self.q_end - self.q_start
+            self.t_min = 2.0 * np.sqrt(np.abs(delta) / a)
+        bad = np.flatnonzero(~np.isfinite(delta))
+        if bad.size:
+            j = int(bad[0]) + 1
+            raise ValueError(f"q_start[{j}] = {_g(self.q_start[j - 1])} and q_end[{j}] = {_g(self.q_end[j - 1])} are "
+                             f"too far apart: joint {j}'s move would be {_g(delta[j - 1])} (beyond the largest float)")
         self.duration = float(self.t_min.max())
-        if self.duration == 0.0:
-            self.acceleration = np.zeros(self.dim)
-        else:
-            self.acceleration = 4.0 * delta / self.duration ** 2
-        self.switch_time = 0.5 * self.duration
-        self.peak_velocity = self.acceleration * self.switch_time
+        if not math.isfinite(self.duration):
+            j = int(np.argmax(self.t_min)) + 1
+            raise ValueError(f"a_max[{j}] = {_g(a[j - 1])} is too small for joint {j}'s move of {_g(delta[j - 1])} "
+                             f"(q_start[{j}] to q_end[{j}]): it would take {_g(self.duration)} s (not finite)")
+        with np.errstate(all="ignore"):
+            if self.duration == 0.0:
+                self.acceleration = np.zeros(self.dim)
+            else:
+                try:
+                    self.acceleration = 4.0 * delta / self.duration ** 2
+                except OverflowError:       # duration ** 2 beyond the largest float
+                    self.acceleration = np.full(self.dim, np.nan)
+                if not _finite(self.acceleration) or not self.acceleration[delta != 0.0].all():
+                    self.acceleration = delta / self.duration * (4.0 / self.duration)   # T^2 out of range
+            self.switch_time = 0.5 * self.duration
+            self.peak_velocity = self.acceleration * self.switch_time
+        bad = np.flatnonzero(~np.isfinite(self.acceleration) | ~np.isfinite(self.peak_velocity))
+        if bad.size:
+            j = int(bad[0]) + 1
+            raise ValueError(f"q_start[{j}], q_end[{j}] and a_max: joint {j} moves {_g(delta[j - 1])} in "
+                             f"{_g(self.duration)} s: its acceleration would be {_g(self.acceleration[j - 1])} and "
+                             f"peak velocity {_g(self.peak_velocity[j - 1])} (not finite)")
         self.breakpoints = np.unique([0.0, self.switch_time, self.duration])
         self._break_list = self.breakpoints.tolist()
         self._half_acceleration = 0.5 * self.acceleration
@@ -445,10 +534,43 @@ class Circle(_Profile):
         tb = self.duration * (1.0 - 1.0 / self.cruise_factor)
         self.breakpoints = np.unique([0.0, tb, self.duration - tb, self.duration])
         self._phase = _LSPBPiece(np.zeros(1), np.full(1, 2.0 * np.pi), self.duration, self.cruise_factor)
+        self._check_finite()
         self._phase_values = (np.zeros(1), np.zeros(1), np.zeros(1))
         self._break_list = self.breakpoints.tolist()
         self._center = tuple(self.center.tolist())
         self._extras = list(zip(self.offset.tolist(), self.amplitude.tolist()))
+
+    def _check_finite(self) -> None:
+        """Refuse parameters whose reference overflows (ValueError naming them): the phase's
+        rate and acceleration (duration), the circle's extent, speed and acceleration (center,
+        radius with the phase), each extra coordinate's (offset, amplitude with the phase)."""
+        problem = self._phase.overflow()
+        if problem is not None:
+            what, _, value = problem
+            unit = {"cruise speed": "rad/s", "acceleration": "rad/s2"}.get(what, "rad")
+            raise ValueError(f"duration = {_g(self.duration)} s is too short: once round the circle in it, the "
+                             f"phase's {what} would be {_g(value)} {unit} (not finite); give a longer duration")
+        w, alpha = abs(float(self._phase.V[0])), abs(float(self._phase.a[0]))    # peak phase rate, acceleration
+        r = self.radius
+        with np.errstate(all="ignore"):
+            motion = {"speed": r * w, "acceleration": max(r * alpha, r * w * w)}     # as evaluate_into's terms
+            extent = np.abs(self.center) + r
+            extras = [(abs(o) + abs(m), abs(m) * w, max(abs(m) * alpha, abs(m) * w * w))
+                      for o, m in zip(self.offset, self.amplitude)]
+        for what, value in motion.items():
+            if not math.isfinite(value):
+                raise ValueError(f"radius = {_g(r)} m and duration = {_g(self.duration)} s: the reference's peak "
+                                 f"{what} would be {_g(value)} (not finite); give a smaller radius or a longer duration")
+        if not _finite(extent):
+            k = int(np.flatnonzero(~np.isfinite(extent))[0]) + 1
+            raise ValueError(f"center[{k}] = {_g(self.center[k - 1])} and radius = {_g(r)} m: the circle reaches "
+                             "beyond the largest float")
+        for k, (reach, speed, acceleration) in enumerate(extras, start=1):
+            if not _finite(reach, speed, acceleration):
+                raise ValueError(f"offset[{k}] = {_g(self.offset[k - 1])}, amplitude[{k}] = "
+                                 f"{_g(self.amplitude[k - 1])} and duration = {_g(self.duration)} s: task coordinate "
+                                 f"{k + 2} would reach {_g(reach)}, speed {_g(speed)}, acceleration "
+                                 f"{_g(acceleration)} (not finite)")
 
     def phase(self, t: float) -> tuple[float, float, float]:
         """phi (rad), phid (rad/s), phidd (rad/s^2) at ``t``: LSPB from 0 to 2 pi, at rest outside."""

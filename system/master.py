@@ -22,7 +22,10 @@ Ctrl-C (SIGINT) during :meth:`Master.run` stops the run at the next communicatio
 handler installed for the run only notes the signal (a KeyboardInterrupt raised inside an FMU's
 Python code would take pythonfmu's fragile exception path), the loop checks it after recording
 each point, the FMUs are terminated and freed, and :class:`Interrupted` carries the points
-recorded so far.
+recorded so far. A KeyboardInterrupt all the same (raised by a ``progress`` or ``log``
+callback, or where no handler could be installed) is an interruption too, and so is a
+KeyboardInterrupt raised in a block's own Python code during an FMI call: the block abandons
+the call with fmi2Error and a message holding :data:`INTERRUPTION`, which the master recognizes.
 
 ``Result``, ``DiagramError`` and ``step_count`` are re-exported from
 :mod:`robofmu.system.result` and :mod:`robofmu.system.check`.
@@ -51,6 +54,11 @@ __all__ = ["ALGORITHMS", "DiagramError", "Interrupted", "Master", "Result", "Sim
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 
+#: What a robofmu block logs when a KeyboardInterrupt in its Python code abandons an FMI call
+#: (``robofmu.components.fmi.base.INTERRUPTION``, the same text: the FMUs may run another copy
+#: of the components than this process imports, so it is matched as text).
+INTERRUPTION = "interrupted: KeyboardInterrupt (Ctrl-C) in the block's Python code"
+
 
 class SimulationError(RuntimeError):
     """A run failed.
@@ -77,11 +85,15 @@ class SimulationError(RuntimeError):
 
 
 class Interrupted(SimulationError):
-    """The run was interrupted (SIGINT: Ctrl-C) and stopped at a communication point.
+    """The run was interrupted (SIGINT: Ctrl-C, or a KeyboardInterrupt) and stopped at a
+    communication point.
 
     The master stops at the first communication point after the signal, once that point is
-    recorded; the FMUs are terminated and freed as after any run. ``time`` is the last recorded
-    point (None: interrupted before the first one), ``result`` every point up to it, ``block`` None.
+    recorded; the FMUs are terminated and freed as after any run. A KeyboardInterrupt raised in
+    the master's loop (a callback) or in a block's Python code during an FMI call stops it at
+    once, keeping the points recorded before. ``time`` is the last recorded point (None:
+    interrupted before the first one), ``result`` every point up to it (None: none), ``block``
+    the block whose code was interrupted, else None.
     """
 
 
@@ -245,9 +257,10 @@ class Master:
         Raises
         ------
         ValueError
-            A bad step or stop time (not a whole number of steps), an unknown algorithm, or a
-            recording that would not fit in memory (:meth:`memory_problem`); nothing is
-            instantiated.
+            A bad start time, stop time or step (not finite, a step not > 0, a stop time not
+            after the start or not a whole number of steps; each named as the argument, or as
+            the system's value it defaults to), an unknown algorithm, or a recording that would
+            not fit in memory (:meth:`memory_problem`); nothing is instantiated.
         DiagramError
             The diagram or the ``record`` selection cannot run (:meth:`check`).
         SimulationError
@@ -257,15 +270,19 @@ class Master:
             SIGINT (Ctrl-C) during the run: the run stops at the next communication point; its
             ``result`` holds every point up to it (also written to ``csv_path``). The handler
             that notes the signal is installed for the run only (main thread), the previous one
-            restored afterwards.
+            restored afterwards. A KeyboardInterrupt raised all the same (by ``progress`` or
+            ``log``, or in a block's Python code during an FMI call: ``block`` names it) stops
+            the run at once, with every point recorded before it, written to ``csv_path`` too.
         """
         system = self.system
-        stop_time = system.stop_time if stop_time is None else float(stop_time)
-        h = system.step if step is None else float(step)
+        given = {"start_time": start_time, "stop_time": stop_time, "step": step}
+        start_time = float(start_time)
+        stop_time = float(system.stop_time if stop_time is None else stop_time)
+        h = float(system.step if step is None else step)
         algorithm = system.algorithm if algorithm is None else algorithm
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(ALGORITHMS)}")
-        n_steps = step_count(start_time, stop_time, h)
+        n_steps = _checked_steps(start_time, stop_time, h, given, system.name)
         if self.plan is None:
             self.check()
         problem = self.memory_problem(n_steps)
@@ -273,7 +290,11 @@ class Master:
             raise ValueError(problem)
         with sigint_flag() as interrupted:     # the loop stops at the next point (no exception in a FMU)
             try:
-                self._instantiate(start_time, stop_time)
+                try:
+                    self._instantiate(start_time, stop_time)
+                except KeyboardInterrupt:
+                    raise Interrupted("interrupted before the first communication point (KeyboardInterrupt)",
+                                      None, None, None) from None
                 if interrupted[0]:
                     raise Interrupted("interrupted before the first communication point", None, None, None)
                 return self._loop(start_time, h, n_steps, algorithm, csv_path, interrupted)
@@ -292,6 +313,9 @@ class Master:
             try:
                 block.initialize(start_time, node.spec.parameters, stop_time=stop_time)
             except FMUError as exc:
+                if any(INTERRUPTION in text for text in exc.logged):
+                    reason = f"interrupted before the first communication point (KeyboardInterrupt in {exc.call} of {name})"
+                    raise Interrupted(f"{reason}: {exc}", name, None, None, reason) from None
                 raise SimulationError(f"{exc}", name, start_time, None) from None
 
     def _layout(self) -> None:
@@ -418,19 +442,19 @@ class Master:
                     op(t, h)
                 if self.progress is not None and (k + 1) % every == 0:
                     self.progress((k + 1) / n_steps, t + h)
+        except KeyboardInterrupt:       # a callback's, or a signal no handler could note
+            kept = (times, recorded, n_recorded, algorithm, h, csv_path)
+            raise self._interruption(" (KeyboardInterrupt)", None, *kept) from None
         except _Failure as exc:
+            kept = (times, recorded, n_recorded, algorithm, h, csv_path)
             if exc.call == "SIGINT":
-                reason = f"interrupted at t = {t:.9g} s"
-                result = Result(times[:n_recorded].copy(), list(self.columns), recorded[:n_recorded].copy(),
-                                {"interrupted": float(t), "algorithm": algorithm, "step": h}, dict(self.units))
-                if csv_path is not None:
-                    result.to_csv(csv_path)
-                raise Interrupted(reason + f"; results up to t = {t:.9g} s kept"
-                                  + (f" in {csv_path}" if csv_path else ""), None, float(t), result,
-                                  reason) from None
+                raise self._interruption("", None, *kept) from None
             if exc.call:
                 logged = [m.message for m in self.blocks[exc.block].messages
                           if m.status in ("ERROR", "FATAL", "DISCARD")]
+                if logged and INTERRUPTION in logged[-1]:      # the block's code was interrupted
+                    raise self._interruption(f" (KeyboardInterrupt in {exc.block}'s {exc.call})", exc.block,
+                                             *kept) from None
                 message = (f"{exc.block}: {exc.call} failed at t = {t:.9g} s"
                            + (": " + logged[-1] if logged else f" (status {exc.message})"))
             else:
@@ -449,11 +473,53 @@ class Master:
             result.to_csv(csv_path)
         return result
 
+    def _interruption(self, how: str, block: str | None, times: np.ndarray, recorded: np.ndarray, n_recorded: int,
+                      algorithm: str, h: float, csv_path) -> Interrupted:
+        """The :class:`Interrupted` of a run stopped after ``n_recorded`` points (``how``: what
+        interrupted it, appended to the reason), with the result so far, written to ``csv_path``."""
+        if not n_recorded:
+            reason = f"interrupted before the first communication point{how}"
+            return Interrupted(reason, block, None, None, reason)
+        t = float(times[n_recorded - 1])
+        reason = f"interrupted at t = {t:.9g} s{how}"
+        result = Result(times[:n_recorded].copy(), list(self.columns), recorded[:n_recorded].copy(),
+                        {"interrupted": t, "algorithm": algorithm, "step": h}, dict(self.units))
+        if csv_path is not None:
+            result.to_csv(csv_path)
+        return Interrupted(reason + f"; results up to t = {t:.9g} s kept" + (f" in {csv_path}" if csv_path else ""),
+                           block, t, result, reason)
+
     def close(self) -> None:
         """Terminate and free every instantiated block. Safe to call twice."""
         for block in self.blocks.values():
             block.close()
         self.blocks = {}
+
+
+def _checked_steps(start_time: float, stop_time: float, h: float, given: dict, name: str) -> int:
+    """:func:`step_count` of a run, each bad argument refused first (ValueError naming it: the
+    argument of :meth:`Master.run`, or the system's value it defaults to)."""
+    values = {"start_time": start_time, "stop_time": stop_time, "step": h}
+
+    def named(key: str) -> str:
+        return f"{key} = {values[key]!r} s" if given[key] is not None or key == "start_time" else \
+            f"{key} = {values[key]!r} s (system {name!r})"
+
+    for key, value in values.items():
+        if not math.isfinite(value):
+            raise ValueError(f"Master.run: {named(key)} is invalid: must be a finite time")
+    if not h > 0.0:
+        raise ValueError(f"Master.run: {named('step')} is invalid: must be > 0")
+    if not stop_time > start_time:
+        raise ValueError(f"Master.run: {named('stop_time')} is invalid: must be after {named('start_time')}")
+    ratio = (stop_time - start_time) / h
+    if not ratio <= 1e15:
+        raise ValueError(f"Master.run: {named('stop_time')}, {named('start_time')} and {named('step')} make "
+                         f"{ratio:.3g} steps, far more than memory can record")
+    try:
+        return step_count(start_time, stop_time, h)
+    except ValueError as exc:
+        raise ValueError(f"Master.run: {exc}") from None
 
 
 # -- the exchange ----------------------------------------------------------------------------------

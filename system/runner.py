@@ -386,8 +386,9 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
         A mistake, before anything runs: :class:`UsageError`, ExperimentError or DiagramError,
         each one line naming the option, file or key.
     Interrupted
-        Ctrl-C during the co-simulation: ``out_dir`` holds ``results.csv`` with the points
-        recorded so far and a short report.
+        Ctrl-C (SIGINT, or a KeyboardInterrupt: in a block's code, a callback) during the
+        co-simulation: ``out_dir`` holds ``results.csv`` with the points recorded so far and a
+        short report; the exception's ``result`` holds them too.
     SimulationError
         The run failed: ``out_dir`` holds ``results.csv`` with the points recorded so far and a
         short report naming the failure.
@@ -428,7 +429,8 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
             kept.write(out / results)
             points = f"{results} holds the {len(kept.time)} points up to t = {kept.time[-1]:.9g} s"
             if isinstance(exc, Interrupted):
-                text = f"Interrupted (SIGINT) {exc.reason.removeprefix('interrupted ')}; {points}; no figures."
+                how = "" if "KeyboardInterrupt" in exc.reason else " (SIGINT)"
+                text = f"Interrupted{how} {exc.reason.removeprefix('interrupted ')}; {points}; no figures."
             else:
                 text = f"The run failed: {' '.join(exc.reason.split())}\n\n{points}; no figures."
             (out / "report.md").write_text(_short_report(system.name, text))
@@ -436,7 +438,13 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
             where = (f"; results up to t = {kept.time[-1]:.9g} s in {final / results} "
                      f"(report: {final / 'report.md'})")
             raise type(exc)(exc.reason + where, exc.block, exc.time, kept, exc.reason) from None
-        result.write(out / results)
+        try:
+            result.write(out / results)
+        except KeyboardInterrupt:      # the file may be cut short: not swapped in; the result is on the exception
+            folder.discard()
+            reason = "interrupted while writing the complete results"
+            raise Interrupted(f"{reason}; {final} untouched (the exception's result holds them)", None,
+                              float(result.time[-1]), result, reason) from None
         try:
             metrics = analysis.tracking(result, roles)
             section = analysis.tracking_report(system.name, system.description, metrics, result)

@@ -296,7 +296,11 @@ def test_doctor_on_good_fmus(fmu_root, tmp_path):
     text = done.stdout
     assert "Traceback" not in done.stderr
     assert f"python      {sys.executable}" in text
-    assert "export LD_PRELOAD=" in text and f"export PATH={Path(sys.executable).parent}:$PATH" in text
+    assert "LD_PRELOAD" not in text
+    n = sum(1 for _ in fmu_root.glob("*/*.fmu"))
+    assert (f"  ok       {n} FMUs recording Python {sys.version_info.major}.{sys.version_info.minor} "
+            f"(program {sys.executable}, libpython ") in text
+    assert "a host that is not Python loads them with no environment variable" in text
     for package in ("numpy", "pin", "scipy"):
         assert f"  ok       {package} " in text
     assert "imported as pinocchio: the FMUs import it" in text
@@ -315,3 +319,98 @@ def test_doctor_names_a_stale_and_a_missing_fmu(work, tmp_path):
     assert done.stdout.rstrip().endswith(f"{len(problems)} problems")
     missing_folder = cli("doctor", "--fmus", tmp_path / "none", cwd=tmp_path)
     assert missing_folder.returncode == 1 and "no such folder" in missing_folder.stdout
+
+
+# -- interruptions through the Python API and the CLI keep what was recorded ------------------------
+def test_run_experiment_refuses_an_infinite_stop_time_naming_it(fmu_root, tmp_path):
+    from robofmu.system.runner import UsageError, run_experiment
+
+    with pytest.raises(UsageError) as info:
+        run_experiment("rrp-line", tmp_path / "out", fmu_dir=fmu_root, stop_time=float("inf"), progress=False)
+    assert str(info.value) == "--stop inf: must be a finite time > 0 s"
+    assert not (tmp_path / "out").exists() and list(tmp_path.iterdir()) == []
+
+
+def _interrupting_progress(after: int):
+    """A progress_printer stand-in raising KeyboardInterrupt at its ``after``-th call."""
+    def printer(label, stream=None):
+        calls = []
+
+        def show(fraction, t):
+            calls.append(t)
+            if len(calls) == after:
+                raise KeyboardInterrupt
+        return show
+    return printer
+
+
+def test_run_experiment_interrupted_keeps_the_rows_on_the_exception_and_on_disk(fmu_root, tmp_path, monkeypatch):
+    """Python API: a KeyboardInterrupt in the progress callback (its 2nd call, after the step to
+    0.01 s) raises Interrupted whose result holds the rows t = 0 .. 0.009 s of an uninterrupted
+    run; out_dir holds them as results.csv and a report saying so."""
+    import robofmu.system.runner as runner
+
+    sources_unchanged()
+    reference = Master(experiment.load("rrp-line", fmu_dir=fmu_root)).run(stop_time=0.1)
+    monkeypatch.setattr(runner, "progress_printer", _interrupting_progress(2))
+    out = tmp_path / "out"
+    with pytest.raises(Interrupted) as info:
+        runner.run_experiment("rrp-line", out, fmu_dir=fmu_root, stop_time=0.1, progress=True)
+    err = info.value
+    assert str(err) == (f"interrupted at t = 0.009 s (KeyboardInterrupt); results up to t = 0.009 s in "
+                        f"{out / 'results.csv'} (report: {out / 'report.md'})")
+    assert len(err.result.time) == 10
+    np.testing.assert_array_equal(err.result.data, reference.data[:10])
+    np.testing.assert_array_equal(Result.from_csv(out / "results.csv").data, reference.data[:10])
+    assert (out / "report.md").read_text() == ("# rrp-line\n\nInterrupted at t = 0.009 s (KeyboardInterrupt); "
+                                               "results.csv holds the 10 points up to t = 0.009 s; no figures.\n")
+    assert sorted(p.name for p in out.iterdir()) == ["report.md", "results.csv"]
+
+
+def test_cli_run_interrupted_inside_a_block_exits_130_keeping_the_rows(fmu_root, tmp_path, monkeypatch, capsys):
+    """`robofmu run` (in process), the plant's step from 0.02 s interrupted: one line, exit 130,
+    the rows t = 0 .. 0.02 s kept."""
+    from robofmu.components.blocks import block_type
+    from robofmu.components.robots import load_description
+    from robofmu.system import cli as command
+
+    sources_unchanged()
+    reference = Master(experiment.load("rrp-line", fmu_dir=fmu_root)).run(stop_time=0.1)
+    cls = block_type(load_description("rrp"), "plant")
+    original = cls.advance
+
+    def advance(self, t, h):
+        if t >= 0.02 - 1e-12:
+            raise KeyboardInterrupt
+        return original(self, t, h)
+
+    monkeypatch.setattr(cls, "advance", advance)
+    out = tmp_path / "out"
+    status = command.main(["run", "rrp-line", "--stop", "0.1", "--out", str(out), "--fmus", str(fmu_root)])
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("robofmu")]
+    assert status == 130 and "Traceback" not in err
+    assert lines == [f"robofmu run: interrupted at t = 0.02 s (KeyboardInterrupt in plant's fmi2DoStep); results up "
+                     f"to t = 0.02 s in {out / 'results.csv'} (report: {out / 'report.md'})"]
+    np.testing.assert_array_equal(Result.from_csv(out / "results.csv").data, reference.data[:21])
+
+
+def test_run_experiment_interrupted_writing_the_results_keeps_them_on_the_exception(fmu_root, tmp_path, monkeypatch):
+    """Ctrl-C while the complete results are written: the folder is left as it was (a file cut
+    short is not swapped in) and the exception carries all 101 points."""
+    import robofmu.system.runner as runner
+
+    sources_unchanged()
+
+    def write(self, path):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner.Result, "write", write)
+    out = tmp_path / "out"
+    with pytest.raises(Interrupted) as info:
+        runner.run_experiment("rrp-line", out, fmu_dir=fmu_root, stop_time=0.1, progress=False, figures=False)
+    err = info.value
+    assert str(err) == (f"interrupted while writing the complete results; {out} untouched (the exception's result "
+                        "holds them)")
+    assert len(err.result.time) == 101 and err.time == pytest.approx(0.1)
+    assert not out.exists() and not list(tmp_path.glob(".out.robofmu-*"))

@@ -4,6 +4,7 @@ status that is not OK and a logged message naming the call or the variable; noth
 """
 from __future__ import annotations
 
+import ctypes
 import json
 import math
 import re
@@ -12,10 +13,11 @@ import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 
+from robofmu.components.fmi.base import NOT_UTF8
 from robofmu.components.robots import available, load_model
 from robofmu.system.fmu import Block, FMUError
 
-from fmu_util import open_block, robot_blocks
+from fmu_util import DISCARD, ERROR, FATAL, OK, open_block, robot_blocks
 
 ALL = robot_blocks()
 H = 1e-3
@@ -267,9 +269,10 @@ def test_ik_rates_beyond_qd_limit_count_as_not_reachable(fmu_root):
 @pytest.mark.parametrize("parameters, message", [
     ({"grip_open_after_move": 2}, "grip_open_after_move = 2 must come after grip_close_after_move = 3"),
     ({"grip_close_after_move": 0}, "grip_open_after_move = 6: the gripper never closes"),
-    ({"durations": "1e-300 3 1 1 2 1 1"}, "the parameters give a non-finite reference"),
+    ({"durations": "1e-300 3 1 1 2 1 1"}, "initialization failed: durations: move 1 takes 1e-300 s, too short for "
+     "waypoints rows 1 to 2 (coordinate 3 changes by 0.15): its acceleration would be inf (not finite)"),
     ({"waypoints": "1e308 0 0; -1e308 0 0; 0 0 0; 0 0 0; 0 0 0; 0 0 0; 0 0 0; 0 0 0"},
-     "the parameters give a non-finite reference"),
+     "initialization failed: waypoints: rows 1 and 2 are too far apart: coordinate 1 goes from 1e+308 to -1e+308"),
 ], ids=["open-before-close", "open-without-close", "tiny-duration", "huge-waypoints"])
 def test_trajectory_refuses_inconsistent_or_non_finite_references(fmu_root, parameters, message):
     b = Block(fmu_root / "chess" / "trajectory.fmu", "trajectory")
@@ -317,3 +320,178 @@ def test_bad_parameter_through_simulate_fmu_raises_with_the_fmus_message(fmu_roo
                      start_values={"max_substep": -1.0})
     shown = capfd.readouterr()
     assert "initialization failed: parameter max_substep = -1 s is invalid: must be > 0" in shown.out + shown.err
+
+
+# -- trajectory parameters whose profile overflows: refused naming them, for every variant --------
+def _initialize_raw(instance, parameters: dict) -> int:
+    """fmi2SetupExperiment .. fmi2ExitInitializationMode with ``parameters`` (Real or String) set;
+    the exit's status."""
+    assert instance.call("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0) == OK
+    assert instance.call("fmi2EnterInitializationMode") == OK
+    for name, value in parameters.items():
+        if isinstance(value, str):
+            status = instance.call("fmi2SetString", instance.refs([name]), 1,
+                                   (ctypes.c_char_p * 1)(value.encode()))
+        else:
+            status = instance.set_real([name], [value])
+        assert status == OK, instance.messages
+    return instance.call("fmi2ExitInitializationMode")
+
+
+@pytest.mark.parametrize("robot, parameters, messages", [
+    ("chess", {"durations": "1e-300 3 1 1 2 1 1"},
+     ["durations: move 1 takes 1e-300 s, too short for waypoints rows 1 to 2 (coordinate 3 changes by 0.15): its "
+      "acceleration would be inf (not finite); give move 1 more time (durations) or bring the waypoints closer"]),
+    ("chess", {"waypoints": "1e308 0 0; -1e308 0 0; 0 0 0; 0 0 0; 0 0 0; 0 0 0; 0 0 0; 0 0 0"},
+     ["waypoints: rows 1 and 2 are too far apart: coordinate 1 goes from 1e+308 to -1e+308, a change of -inf"]),
+    ("rrp", {"length": 1e300, "v_max": 1e300, "a_max": 1e-300},
+     ["length = 1e+300 m, v_max = 1e+300 m/s, a_max = 1e-300 m/s2: the line would take inf s"]),
+    ("rrp", {"start[3]": -1.7e308, "length": 1e308, "v_max": 1e300, "a_max": 1e300},
+     ["start[3] = -1.7e+308 and length = 1e+308 m: the end point's coordinate 3 would be -inf"]),
+    ("rpp", {"q_end[1]": 1e10, "a_max[1]": 1e-300},
+     ["a_max[1] = 1e-300 is too small for joint 1's move of 1e+10 (q_start[1] to q_end[1]): it would take inf s"]),
+    ("rpp", {"q_start[1]": -1e308, "q_end[1]": 1e308},
+     ["q_start[1] = -1e+308 and q_end[1] = 1e+308 are too far apart: joint 1's move would be inf"]),
+    ("3rrp", {"duration": 1e-300},
+     ["duration = 1e-300 s is too short: once round the circle in it, the phase's acceleration would be inf rad/s2"]),
+    ("3rrp", {"radius": 1e308},
+     ["radius = 1e+308 m and duration = 4 s: the reference's peak speed would be inf (not finite)"]),
+], ids=["waypoints-tiny-duration", "waypoints-huge-positions", "line-tiny-a_max", "line-huge-start",
+        "bangbang-tiny-a_max", "bangbang-huge-positions", "circle-tiny-duration", "circle-huge-radius"])
+def test_overflowing_trajectory_is_refused_naming_the_parameter(fmu_root, raw_instances, robot, parameters, messages):
+    """Debug logging off: the exit fails with fmi2Error and the one message names the parameters and why;
+    the outputs stay finite."""
+    b = raw_instances(fmu_root / robot / "trajectory.fmu", "trajectory")
+    assert _initialize_raw(b, parameters) == ERROR
+    (text,) = b.texts("ERROR")
+    assert text.startswith("trajectory: initialization failed: ")
+    for message in messages:
+        assert message in text
+    status, values = b.get_real(b.names("Real", "output"))
+    assert status == OK and np.all(np.isfinite(values))
+
+
+# -- fmi2SetupExperiment: every refusal logs its reason, naming the argument -----------------------
+@pytest.mark.parametrize("arguments, message", [
+    ((0, 0.0, math.nan, 0, 0.0), "fmi2SetupExperiment: startTime = nan s is invalid: must be finite; nothing set"),
+    ((0, 0.0, -math.inf, 0, 0.0), "fmi2SetupExperiment: startTime = -inf s is invalid: must be finite; nothing set"),
+    ((0, 0.0, 1.0, 1, 0.5), "fmi2SetupExperiment: stopTime = 0.5 s is before startTime = 1.0 s; nothing set"),
+    ((0, 0.0, 0.0, 1, math.nan), "fmi2SetupExperiment: stopTime = nan s is invalid: must be finite (or not defined: "
+                                 "stopTimeDefined = fmi2False); nothing set"),
+    ((0, 0.0, 0.0, 1, math.inf), "fmi2SetupExperiment: stopTime = inf s is invalid: must be finite"),
+    ((1, -1e-6, 0.0, 0, 0.0), "fmi2SetupExperiment: tolerance = -1e-06 is invalid: must be finite and >= 0 (or not "
+                              "defined: toleranceDefined = fmi2False); nothing set"),
+    ((1, math.nan, 0.0, 0, 0.0), "fmi2SetupExperiment: tolerance = nan is invalid: must be finite and >= 0"),
+    ((1, -1.0, math.nan, 1, -5.0), "fmi2SetupExperiment: startTime = nan s is invalid: must be finite; tolerance = "
+                                   "-1.0 is invalid: must be finite and >= 0 (or not defined: toleranceDefined = "
+                                   "fmi2False); nothing set"),
+], ids=["start-nan", "start-minus-inf", "stop-before-start", "stop-nan", "stop-inf", "tolerance-negative",
+        "tolerance-nan", "several"])
+@pytest.mark.parametrize("logging_on", [False, True], ids=["logging-off", "logging-on"])
+@pytest.mark.parametrize("robot, kind", [("rrp", "plant"), ("chess", "trajectory")])
+def test_bad_setup_experiment_is_refused_naming_the_argument(fmu_root, raw_instances, robot, kind, arguments,
+                                                             message, logging_on):
+    b = raw_instances(fmu_root / robot / f"{kind}.fmu", kind, logging_on=logging_on)
+    toleranceDefined, tolerance, start, stopDefined, stop = arguments
+    status = b.call("fmi2SetupExperiment", toleranceDefined, ctypes.c_double(tolerance), ctypes.c_double(start),
+                    stopDefined, ctypes.c_double(stop))
+    assert status == ERROR
+    (text,) = b.texts("ERROR", "FATAL")
+    assert text.startswith(f"{kind}: {message}")
+    assert b.call("fmi2SetupExperiment", 0, 0.0, 0.0, 1, 1.0) == OK      # nothing was set; it goes on
+    assert b.call("fmi2EnterInitializationMode") == OK and b.call("fmi2ExitInitializationMode") == OK
+    assert b.step(0.0) == OK and b.real_status(2) == (OK, H)      # fmi2LastSuccessfulTime: from t = 0
+
+
+@pytest.mark.parametrize("arguments", [(0, -1.0, 2.0, 0, math.nan), (1, 0.0, 2.0, 1, 2.0), (1, 1e-6, -1.0, 1, 3.0)],
+                         ids=["undefined-ignored", "stop-at-start-tolerance-zero", "negative-start"])
+def test_valid_setup_experiment_is_accepted_silently(fmu_root, raw_instances, arguments):
+    b = raw_instances(fmu_root / "rrp" / "plant.fmu", "plant")
+    toleranceDefined, tolerance, start, stopDefined, stop = arguments
+    assert b.call("fmi2SetupExperiment", toleranceDefined, ctypes.c_double(tolerance), ctypes.c_double(start),
+                  stopDefined, ctypes.c_double(stop)) == OK
+    assert b.messages == []
+    assert b.call("fmi2EnterInitializationMode") == OK and b.call("fmi2ExitInitializationMode") == OK
+    assert b.step(start) == OK and b.real_status(2) == (OK, start + H)
+
+
+@pytest.mark.parametrize("terminated", [False, True], ids=["initialized", "terminated"])
+def test_setup_experiment_after_initialization_is_refused(fmu_root, raw_instances, terminated):
+    b = raw_instances(fmu_root / "rrp" / "plant.fmu", "plant")
+    assert b.initialize() == OK
+    if terminated:
+        assert b.call("fmi2Terminate") == OK
+    assert b.call("fmi2SetupExperiment", 0, 0.0, ctypes.c_double(5.0), 0, 0.0) == ERROR
+    assert b.texts("ERROR") == [f"plant: fmi2SetupExperiment: the instance is already "
+                                f"{'terminated' if terminated else 'initialized'}"]
+
+
+# -- fmi2SetString of a value that is not valid UTF-8 ----------------------------------------------
+STRING_PARAMETERS = [pytest.param("chess", "trajectory", "waypoints", "durations", id="chess-trajectory"),
+                     pytest.param("chess", "ik", "elbow", None, id="chess-ik"),
+                     pytest.param("planar2r", "ik", "step_control", None, id="planar2r-ik")]
+
+
+def get_string(instance, name: str) -> str:
+    out = (ctypes.c_char_p * 1)()
+    assert instance.call("fmi2GetString", instance.refs([name]), 1, out) == OK
+    return out[0].decode()
+
+
+@pytest.mark.parametrize("robot, kind, name, other", STRING_PARAMETERS)
+@pytest.mark.parametrize("value, problem", [
+    (NOT_UTF8 + "fffe", "the value b'\\xff\\xfe' (2 bytes) is not valid UTF-8: invalid start byte at byte 0 (ff)"),
+    (NOT_UTF8 + "75703a20c328", "the value b'up: \\xc3(' (6 bytes) is not valid UTF-8: invalid continuation byte "
+                                "at byte 4 (c3)"),
+    (None, "no value (a NULL string)"),
+], ids=["ff-fe", "truncated-sequence", "null"])
+def test_string_parameter_that_is_no_text_is_refused_naming_it(fmu_root, raw_instances, robot, kind, name, other,
+                                                               value, problem):
+    """What robofmu's export library forwards for bytes that are not UTF-8 (NOT_UTF8 + their hex;
+    see the next test), and a NULL string: fmi2Error naming the parameter, debug logging off,
+    nothing set (not even the valid value set in the same call), the instance usable."""
+    b = raw_instances(fmu_root / robot / f"{kind}.fmu", kind)
+    assert b.call("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0) == OK
+    assert b.call("fmi2EnterInitializationMode") == OK
+    before = {n: get_string(b, n) for n in (name, other) if n}
+    names = [other, name] if other else [name]
+    values = ([b"1 1 1 1 1 1 1"] if other else []) + [None if value is None else value.encode()]
+    status = b.call("fmi2SetString", b.refs(names), len(names), (ctypes.c_char_p * len(names))(*values))
+    assert status == ERROR
+    assert b.texts("ERROR", "FATAL") == [f"{kind}: fmi2SetString: parameter {name}: {problem}; nothing set"]
+    assert {n: get_string(b, n) for n in before} == before
+    assert b.call("fmi2ExitInitializationMode") == OK
+    assert b.step(0.0) == OK
+
+
+_RAW_BYTES_SCRIPT = """
+import ctypes, json, sys
+sys.path.insert(0, sys.argv[1])
+from pathlib import Path
+from fmu_util import RawInstance
+b = RawInstance(Path(sys.argv[2]), sys.argv[3])
+calls = [b.call("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0), b.call("fmi2EnterInitializationMode"),
+         b.call("fmi2SetString", b.refs([sys.argv[4]]), 1, (ctypes.c_char_p * 1)(b"\\xff\\xfe")),
+         b.call("fmi2ExitInitializationMode")]
+print(json.dumps({"statuses": calls, "messages": b.messages}), flush=True)
+b.close()
+"""
+
+
+@pytest.mark.parametrize("robot, kind, name, other", STRING_PARAMETERS)
+def test_raw_bytes_that_are_not_utf8_are_refused_naming_the_parameter(fmu_root, tmp_path, robot, kind, name, other):
+    """b'\\xff\\xfe' through fmi2SetString: fmi2Error naming the parameter, then a normal
+    initialization (in a child process: today's answer damages the instance)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    done = subprocess.run([sys.executable, "-c", _RAW_BYTES_SCRIPT, str(Path(__file__).parent),
+                           str(fmu_root / robot / f"{kind}.fmu"), kind, name], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    answer = json.loads(done.stdout.splitlines()[-1])
+    assert answer["statuses"] == [OK, OK, ERROR, OK]
+    assert [m[2] for m in answer["messages"]] == [
+        f"{kind}: fmi2SetString: parameter {name}: the value b'\\xff\\xfe' (2 bytes) is not valid UTF-8: "
+        "invalid start byte at byte 0 (ff); nothing set"]

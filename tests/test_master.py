@@ -16,7 +16,7 @@ from robofmu.components.ik import make_solver
 from robofmu.components.robots import load_description, load_model
 from robofmu.system import experiment
 from robofmu.system.diagram import BlockSpec, System
-from robofmu.system.master import DiagramError, Master, Result, SimulationError
+from robofmu.system.master import DiagramError, Interrupted, Master, Result, SimulationError
 from robofmu.system.replica import InProcessDiagram
 
 EXPERIMENTS = ["chess-pd", "rrp-line", "rpp-bangbang"]
@@ -306,3 +306,150 @@ def test_outputs_neither_wired_nor_recorded_are_not_read(fmu_root):
     assert "ik.q_ref[1]" in lean.real_names                                         # wired to the controller
     assert few.columns == [c for c in everything.columns if c.startswith(("plant.q[", "controller.tau["))]
     np.testing.assert_array_equal(few.data, everything.data[:, [everything.columns.index(c) for c in few.columns]])
+
+
+# -- times the master cannot run: refused naming the argument, nothing instantiated ----------------
+@pytest.mark.parametrize("arguments, message", [
+    (dict(stop_time=float("inf")), "Master.run: stop_time = inf s is invalid: must be a finite time"),
+    (dict(stop_time=float("nan")), "Master.run: stop_time = nan s is invalid: must be a finite time"),
+    (dict(stop_time=1.0, start_time=float("-inf")), "Master.run: start_time = -inf s is invalid: must be a finite time"),
+    (dict(step=float("inf")), "Master.run: step = inf s is invalid: must be a finite time"),
+    (dict(step=-1e-3), "Master.run: step = -0.001 s is invalid: must be > 0"),
+    (dict(stop_time=-1.0), "Master.run: stop_time = -1.0 s is invalid: must be after start_time = 0.0 s"),
+    (dict(stop_time=1e300, step=1e-300), "Master.run: stop_time = 1e+300 s, start_time = 0.0 s and step = 1e-300 s "
+                                         "make inf steps, far more than memory can record"),
+    (dict(stop_time=0.0105), "Master.run: stop time 0.0105 s is not start time 0.0 s plus a whole number of 0.001 s "
+                             "steps"),
+], ids=["stop-inf", "stop-nan", "start-minus-inf", "step-inf", "step-negative", "stop-before-start", "absurd-steps",
+        "not-whole"])
+def test_bad_run_times_are_refused_naming_the_argument(fmu_root, arguments, message):
+    master = Master(experiment.load("rrp-line", fmu_dir=fmu_root))
+    with pytest.raises(ValueError) as info:
+        master.run(**arguments)
+    assert str(info.value) == message
+    assert master.blocks == {}
+
+
+def test_a_systems_infinite_stop_time_is_refused_naming_it(fmu_root):
+    system = dataclasses.replace(experiment.load("rrp-line", fmu_dir=fmu_root), stop_time=float("inf"))
+    with pytest.raises(ValueError) as info:
+        Master(system).run()
+    assert str(info.value) == "Master.run: stop_time = inf s (system 'rrp-line') is invalid: must be a finite time"
+
+
+# -- interruptions keep what was recorded -----------------------------------------------------------
+def _block_class(robot: str, kind: str):
+    from robofmu.components.blocks import block_type
+
+    description = load_description(robot)
+    return block_type(description, kind)
+
+
+def interrupt_at(monkeypatch, robot: str, kind: str, method: str, at: float) -> None:
+    """Make ``kind``'s ``method`` (advance or output) of ``robot`` raise KeyboardInterrupt from
+    time ``at`` on, in the FMUs this process instantiates (they run this process's components)."""
+    cls = _block_class(robot, kind)
+    original = getattr(cls, method)
+
+    def interrupted(self, t, *args):
+        if t >= at - 1e-12:
+            raise KeyboardInterrupt
+        return original(self, t, *args)
+
+    monkeypatch.setattr(cls, method, interrupted)
+
+
+@pytest.fixture(scope="module")
+def rrp_line_run(fmu_root):
+    """rrp-line over 0.1 s, uninterrupted."""
+    return Master(experiment.load("rrp-line", fmu_dir=fmu_root)).run(stop_time=0.1)
+
+
+@pytest.mark.parametrize("fast", ["1", "0"], ids=["fast-path", "no-fast-path"])
+@pytest.mark.parametrize("kind, method, call, kept", [("plant", "advance", "fmi2DoStep", 51),
+                                                      ("controller", "output", "fmi2GetReal", 30)])
+def test_ctrl_c_inside_a_block_is_an_interruption_keeping_the_rows(fmu_root, tmp_path, monkeypatch, rrp_line_run,
+                                                                   fast, kind, method, call, kept):
+    """A KeyboardInterrupt in a block's Python code (the plant's step from 0.05 s, the controller's
+    outputs at 0.03 s): the block fails the call naming the interruption, the master reports an
+    Interrupted (not a failure) with every row before, equal to an uninterrupted run's."""
+    monkeypatch.setenv("ROBOFMU_FMI_FAST_PATH", fast)
+    interrupt_at(monkeypatch, "rrp", kind, method, 0.05 if kind == "plant" else 0.03)
+    csv = tmp_path / "results.csv"
+    master = Master(experiment.load("rrp-line", fmu_dir=fmu_root))
+    with pytest.raises(Interrupted) as info:
+        master.run(stop_time=0.1, csv_path=csv)
+    err = info.value
+    t = rrp_line_run.time[kept - 1]
+    assert str(err) == (f"interrupted at t = {t:.9g} s (KeyboardInterrupt in {kind}'s {call}); results up to "
+                        f"t = {t:.9g} s kept in {csv}")
+    assert err.block == kind and err.time == t and err.reason.startswith(f"interrupted at t = {t:.9g} s")
+    assert len(err.result.time) == kept
+    np.testing.assert_array_equal(err.result.time, rrp_line_run.time[:kept])
+    np.testing.assert_array_equal(err.result.data, rrp_line_run.data[:kept])
+    on_disk = Result.from_csv(csv)
+    np.testing.assert_array_equal(on_disk.data, rrp_line_run.data[:kept])
+    assert master.blocks == {}
+
+
+def test_ctrl_c_inside_a_block_logs_the_interruption(fmu_root, raw_instances, monkeypatch):
+    """The block's side: fmi2Error with a message naming the call, the interruption and the time
+    (debug logging off), the instance still answering."""
+    from fmu_util import ERROR, OK
+
+    interrupt_at(monkeypatch, "rrp", "plant", "advance", 0.002)
+    b = raw_instances(fmu_root / "rrp" / "plant.fmu", "plant")
+    assert b.initialize() == OK
+    assert b.step(0.0) == OK and b.step(0.001) == OK
+    assert b.step(0.002) == ERROR
+    assert b.texts("ERROR", "FATAL") == ["plant: fmi2DoStep interrupted: KeyboardInterrupt (Ctrl-C) in the block's "
+                                         "Python code at t = 0.002 s; the call is abandoned"]
+    assert b.get_real(["q[1]"])[0] == OK
+
+
+def test_interruption_text_is_the_blocks():
+    from robofmu.components.fmi import base
+    from robofmu.system import master
+
+    assert master.INTERRUPTION == base.INTERRUPTION
+
+
+def test_ctrl_c_in_a_callback_keeps_the_rows_and_the_file(fmu_root, tmp_path, rrp_line_run):
+    """A KeyboardInterrupt from the progress callback (its third call, after the step to 0.015 s):
+    Interrupted with the 15 rows recorded before (t = 0 .. 0.014 s), written where asked."""
+    calls = []
+
+    def progress(fraction, t):
+        calls.append(t)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+
+    csv = tmp_path / "results.csv"
+    master = Master(experiment.load("rrp-line", fmu_dir=fmu_root), progress=progress)
+    with pytest.raises(Interrupted) as info:
+        master.run(stop_time=0.1, csv_path=csv)
+    err = info.value
+    assert calls == pytest.approx([0.005, 0.010, 0.015])
+    assert str(err) == f"interrupted at t = 0.014 s (KeyboardInterrupt); results up to t = 0.014 s kept in {csv}"
+    assert err.block is None and err.time == rrp_line_run.time[14]
+    np.testing.assert_array_equal(err.result.data, rrp_line_run.data[:15])
+    np.testing.assert_array_equal(Result.from_csv(csv).data, rrp_line_run.data[:15])
+    assert master.blocks == {}
+
+
+def test_ctrl_c_before_the_first_point_is_an_interruption(fmu_root, monkeypatch):
+    """In the plant's initialization (a KeyboardInterrupt in its configure): Interrupted, nothing recorded."""
+    cls = _block_class("rrp", "plant")
+
+    def configure(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cls, "configure", configure)
+    master = Master(experiment.load("rrp-line", fmu_dir=fmu_root))
+    with pytest.raises(Interrupted) as info:
+        master.run(stop_time=0.1)
+    err = info.value
+    assert err.result is None and err.time is None and err.block == "plant"
+    assert str(err).startswith("interrupted before the first communication point (KeyboardInterrupt in "
+                               "fmi2ExitInitializationMode of plant): plant: fmi2ExitInitializationMode failed")
+    assert master.blocks == {}

@@ -135,3 +135,82 @@ def test_parse_round_trip_and_errors():
         parse_matrix("0 0; 1 1", "waypoints", columns=3)
     with pytest.raises(ValueError, match="durations: empty"):
         parse_vector("  ", "durations")
+
+
+# -- parameters whose profile overflows: refused naming the parameters and why --------------------
+from robofmu.components.trajectory import Circle, StraightLine, SynchronizedBangBang  # noqa: E402
+
+LINE = dict(start=[0.125, 0.0, 0.125], direction=[0.0, 0.0, -1.0], length=0.03125, v_max=0.016, a_max=0.0375)
+CIRCLE = dict(center=[0.0, 0.0], radius=0.05, start_angle=0.0, sense=1, duration=4.0)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: WaypointTrajectory([[0, 0, 0], [0.1, 0, 0]], [1e-300]),
+     "durations: move 1 takes 1e-300 s, too short for waypoints rows 1 to 2 (coordinate 1 changes by 0.1): its "
+     "acceleration would be inf (not finite); give move 1 more time (durations) or bring the waypoints closer"),
+    (lambda: WaypointTrajectory([[0, 0, 0], [1e300, 0, 0], [-1e300, 0, 0]], [1.0, 1e-10]),
+     "durations: move 2 takes 1e-10 s, too short for waypoints rows 2 to 3 (coordinate 1 changes by -2e+300): its "
+     "cruise speed would be -inf (not finite)"),
+    (lambda: WaypointTrajectory([[1e308, 0, 0], [-1e308, 0, 0]], [1.0]),
+     "waypoints: rows 1 and 2 are too far apart: coordinate 1 goes from 1e+308 to -1e+308, a change of -inf "
+     "(beyond the largest float); bring the waypoints closer"),
+    (lambda: WaypointTrajectory([[0, 0, 0], [1, 0, 0], [0, 0, 0]], [1e308, 1e308]),
+     "durations, pause: the moves (inf s in all) and pauses (0 s each) add up to inf s, beyond the largest float"),
+    (lambda: WaypointTrajectory([[0, 0, 0], [1, 0, 0], [0, 0, 0]], [1e300, 1.0]),
+     "durations: move 2 of 1 s starts at t = 1e+300 s, where so short a time is lost in rounding"),
+    (lambda: WaypointTrajectory([[0, 0, 0], [1, 0, 0], [0, 0, 0]], [1.0, 1.0], pause=1e308),
+     "durations: move 2 of 1 s starts at t = 1e+308 s, where so short a time is lost in rounding (the earlier "
+     "durations and pauses are too long beside it)"),
+    (lambda: StraightLine(**{**LINE, "length": 1e308, "v_max": 1e-300, "a_max": 1.0}),
+     "length = 1e+308 m, v_max = 1e-300 m/s, a_max = 1 m/s2: the line would take inf s (ramps of 1e-300 s, peak "
+     "speed 1e-300 m/s), not finite; give a shorter length or larger v_max and a_max"),
+    (lambda: StraightLine(**{**LINE, "length": 1e300, "v_max": 1e300, "a_max": 1e-300}),
+     "length = 1e+300 m, v_max = 1e+300 m/s, a_max = 1e-300 m/s2: the line would take inf s (ramps of inf s"),
+    (lambda: StraightLine(**{**LINE, "start": [0.0, 0.0, -1.7e308], "length": 1e308, "v_max": 1e300,
+                              "a_max": 1e300}),
+     "start[3] = -1.7e+308 and length = 1e+308 m: the end point's coordinate 3 would be -inf (beyond the largest "
+     "float)"),
+    (lambda: SynchronizedBangBang([0.0, -1e308], [1.0, 1e308], [1.0, 1.0]),
+     "q_start[2] = -1e+308 and q_end[2] = 1e+308 are too far apart: joint 2's move would be inf (beyond the largest "
+     "float)"),
+    (lambda: SynchronizedBangBang([0.0, 0.0], [1.0, 1e10], [1.0, 1e-300]),
+     "a_max[2] = 1e-300 is too small for joint 2's move of 1e+10 (q_start[2] to q_end[2]): it would take inf s "
+     "(not finite)"),
+    (lambda: Circle(**{**CIRCLE, "duration": 1e-300}),
+     "duration = 1e-300 s is too short: once round the circle in it, the phase's acceleration would be inf rad/s2 "
+     "(not finite); give a longer duration"),
+    (lambda: Circle(**{**CIRCLE, "radius": 1e308}),
+     "radius = 1e+308 m and duration = 4 s: the reference's peak speed would be inf (not finite); give a smaller "
+     "radius or a longer duration"),
+    (lambda: Circle(**{**CIRCLE, "center": [1.79e308, 0.0], "radius": 1e307, "duration": 1e10}),
+     "center[1] = 1.79e+308 and radius = 1e+307 m: the circle reaches beyond the largest float"),
+    (lambda: Circle(**{**CIRCLE, "duration": 1.0}, offset=[0.5], amplitude=[1e308]),
+     "offset[1] = 0.5, amplitude[1] = 1e+308 and duration = 1 s: task coordinate 3 would reach 1e+308, speed inf, "
+     "acceleration inf (not finite)"),
+], ids=["lspb-tiny-duration", "lspb-huge-waypoints-short-move", "lspb-waypoints-too-far-apart", "lspb-total-inf",
+        "lspb-move-lost-in-rounding", "lspb-pause-huge", "line-inf-duration", "line-inf-ramps", "line-end-overflows",
+        "bangbang-huge-positions", "bangbang-tiny-a_max", "circle-tiny-duration", "circle-huge-radius",
+        "circle-huge-center", "circle-huge-amplitude"])
+def test_overflowing_profile_is_refused_naming_the_parameters(make, message):
+    with np.errstate(all="raise"):              # and quietly: no floating-point warning on the way
+        with pytest.raises(ValueError) as info:
+            make()
+    assert message in str(info.value)
+
+
+def test_extreme_but_finite_profiles_are_accepted_with_the_right_numbers():
+    """Overflow in an intermediate is not an overflow of the profile: these are finite, and their
+    numbers are right (the first two raised OverflowError, the third gave a zero direction)."""
+    line = StraightLine(**{**LINE, "v_max": 1e300})          # v_max^2 overflows: never reached (triangular)
+    assert line.duration == 2.0 * np.sqrt(0.03125 / 0.0375) and line.v_peak == pytest.approx(np.sqrt(0.03125 * 0.0375))
+    bang = SynchronizedBangBang([0.0], [1.7e308], [1.0])     # T^2 overflows
+    assert bang.duration == pytest.approx(2.0 * np.sqrt(1.7e308), rel=1e-15)
+    np.testing.assert_allclose(bang.acceleration, [1.0], rtol=1e-12)
+    q, qd, qdd = bang.evaluate(bang.switch_time)
+    np.testing.assert_allclose(q, [0.85e308], rtol=1e-12)        # half way, at the switch: decelerating
+    np.testing.assert_allclose(qd, [np.sqrt(1.7e308)], rtol=1e-12)
+    np.testing.assert_allclose(qdd, [-1.0], rtol=1e-12)
+    for direction, unit in (([1e308, 1e308, 0.0], [np.sqrt(0.5), np.sqrt(0.5), 0.0]), ([1e-320, 0.0, 0.0], [1.0, 0, 0])):
+        line = StraightLine(**{**LINE, "direction": direction})
+        np.testing.assert_allclose(line.direction, unit, rtol=1e-15)
+        np.testing.assert_allclose(line.end, np.array(LINE["start"]) + 0.03125 * np.array(unit), rtol=1e-15)

@@ -46,21 +46,32 @@ class _Reference(Block):
 
     def configure(self):
         """Refuse a profile whose reference is not finite anywhere (checked at and between its
-        breakpoints, where its extremes lie)."""
+        breakpoints, where its extremes lie). The profiles refuse the overflows they foresee
+        naming the parameters (components/trajectory.py); this check, the last line, names the
+        block's parameters and the instant."""
         breaks = np.asarray(self.profile.breakpoints, dtype=float)
-        times = np.concatenate([breaks, (breaks[:-1] + breaks[1:]) / 2])
+        times = np.concatenate([breaks, breaks[:-1] / 2 + breaks[1:] / 2])    # no overflow of the sum
         for t in times:
             with np.errstate(all="ignore"):
                 values = self.profile.evaluate(float(t))
             for what, value in zip(("position", "velocity", "acceleration"), values):
                 if not np.all(np.isfinite(value)):
-                    raise ValueError(f"the parameters give a non-finite reference {what} at t = {t:g} s "
-                                     f"({np.asarray(value).tolist()})")
+                    raise ValueError(f"the parameters ({', '.join(self.parameter_names())}) give a non-finite "
+                                     f"reference {what} at t = {t:g} s ({np.asarray(value).tolist()})")
         self._views = tuple(self.values[s] for s in self.outputs)   # made once: values is never replaced
         super().configure()
 
     def output(self, t):
         self.profile.evaluate_into(t, *self._views, self.snap)
+
+    def parameter_names(self) -> list[str]:
+        """The block's parameters, each vector once by its base (``start``, ``length``)."""
+        names = []
+        for v in self.variables:
+            base = v.name.split("[", 1)[0]
+            if v.causality == "parameter" and base not in names:
+                names.append(base)
+        return names
 
     def breakpoints(self):
         return self.profile.breakpoints

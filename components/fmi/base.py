@@ -67,6 +67,15 @@ _PYTHONFMU_TYPES = {"Real": Real, "Boolean": Boolean, "Integer": Integer, "Strin
 #: status from the FMI call (``robofmu.system.fmi_export.STATUS_CATEGORY``; the importer sees
 #: pythonfmu's usual category, ``logStatusError``...).
 STATUS_CATEGORY = "robofmu:status"
+#: How a KeyboardInterrupt (Ctrl-C) raised in the block's Python code during an FMI call is
+#: logged (with fmi2Error, the call abandoned): ``"<call> " + INTERRUPTION + " at t = ..."``.
+#: The master reports a failed call whose message holds it as an interruption
+#: (``robofmu.system.master``: the same text).
+INTERRUPTION = "interrupted: KeyboardInterrupt (Ctrl-C) in the block's Python code"
+#: A fmi2SetString value that is not valid UTF-8 reaches the slave as this prefix and the hex of
+#: its bytes: what robofmu's export library is to forward instead of the raw bytes, which
+#: pythonfmu 0.7.0 cannot convert (PyUnicode_FromString fails: fmi2Fatal, the instance damaged).
+NOT_UTF8 = "\x1brobofmu:not-utf8:"
 _PYTHONFMU_LIBRARY = "libpythonfmu-export.so"   # beside robofmu's in binaries/linux64
 
 
@@ -144,6 +153,7 @@ class BlockSlave(Fmi2Slave):
         self._terminated = False
         self._held_warned = False
         self._bad_output: str | None = None     # why the outputs are held (the next step fails)
+        self.interrupted = False        # a KeyboardInterrupt abandoned an FMI call (_report_failure)
         for var in self.logic.variables:
             self._register(var)
         self.values = self.logic.values
@@ -298,8 +308,12 @@ class BlockSlave(Fmi2Slave):
         return (done | _FAST_MESSAGES) if self.log_queue else done
 
     def _report_failure(self, exc: BaseException, call: str) -> None:
-        """Log the exception that failed ``call`` (a _CallFailed is logged already)."""
-        if not isinstance(exc, _CallFailed):
+        """Log the exception that failed ``call`` (a _CallFailed is logged already); a
+        KeyboardInterrupt as an interruption (:data:`INTERRUPTION`), noted in :attr:`interrupted`."""
+        if isinstance(exc, KeyboardInterrupt):
+            self.interrupted = True
+            self._report(f"{call} {INTERRUPTION} at t = {self.time:.9g} s; the call is abandoned")
+        elif not isinstance(exc, _CallFailed):
             self._report(f"{call} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
 
     def _own_description(self):
@@ -443,6 +457,13 @@ class BlockSlave(Fmi2Slave):
 
     def set_string(self, vrs, values):
         self._check_kind(vrs, "String", "fmi2SetString", setting=True)
+        values = list(values)
+        for k, (vr, value) in enumerate(zip(vrs, values)):      # all checked before any is set
+            value, problem = _string_value(value)
+            if problem is not None:
+                var = self.logic.variables[vr]
+                self._raise_to_importer(f"fmi2SetString: {var.causality} {var.name}: {problem}; nothing set")
+            values[k] = value
         super().set_string(vrs, values)
 
     # -- helpers --------------------------------------------------------------------------------
@@ -473,10 +494,27 @@ class BlockSlave(Fmi2Slave):
 
     # -- FMI life cycle -----------------------------------------------------------------------------
     def setup_experiment(self, start_time: float, stop_time=None, tolerance=None):
-        if self._initialized:
-            self._raise_to_importer("fmi2SetupExperiment: the instance is already initialized")
+        """fmi2SetupExperiment (``stop_time``, ``tolerance``: None when not defined). Refused,
+        nothing set, each reason naming its argument: an initialized or terminated instance, a
+        startTime that is not finite, a defined stopTime that is not finite or before startTime,
+        a defined tolerance that is not finite or negative."""
+        if self._initialized or self._terminated:
+            self._raise_to_importer("fmi2SetupExperiment: the instance is already "
+                                    + ("terminated" if self._terminated else "initialized"))
+        problems = []
         if not math.isfinite(start_time):
-            self._raise_to_importer(f"fmi2SetupExperiment: start time {start_time} is not finite")
+            problems.append(f"startTime = {start_time!r} s is invalid: must be finite")
+        if stop_time is not None:
+            if not math.isfinite(stop_time):
+                problems.append(f"stopTime = {stop_time!r} s is invalid: must be finite (or not defined: "
+                                "stopTimeDefined = fmi2False)")
+            elif math.isfinite(start_time) and stop_time < start_time:
+                problems.append(f"stopTime = {stop_time!r} s is before startTime = {start_time!r} s")
+        if tolerance is not None and not (math.isfinite(tolerance) and tolerance >= 0.0):
+            problems.append(f"tolerance = {tolerance!r} is invalid: must be finite and >= 0 (or not defined: "
+                            "toleranceDefined = fmi2False)")
+        if problems:
+            self._raise_to_importer("fmi2SetupExperiment: " + "; ".join(problems) + "; nothing set")
         self.time = float(start_time)
 
     def enter_initialization_mode(self):
@@ -702,6 +740,32 @@ class BlockSlave(Fmi2Slave):
         return complete(super().to_xml(model_options), self.logic, self.robot_name, self.block_kind)
 
 
+def _string_value(value) -> tuple:
+    """``(value, problem)`` for a fmi2SetString value: the value to set (a string robofmu's
+    export library forwarded as :data:`NOT_UTF8` and hex, decoded where it is valid UTF-8 after
+    all), and why it cannot be set, or None."""
+    if value is None:
+        return value, "no value (a NULL string)"
+    if isinstance(value, str) and value.startswith(NOT_UTF8):
+        try:
+            raw = bytes.fromhex(value[len(NOT_UTF8):])
+        except ValueError:
+            return value, "the value is not valid UTF-8"
+        try:
+            return raw.decode("utf-8"), None
+        except UnicodeDecodeError as exc:
+            bad = raw[exc.start:exc.end].hex(" ")
+            shown = repr(raw[:40]) + ("..." if len(raw) > 40 else "")
+            return value, (f"the value {shown} ({len(raw)} bytes) is not valid UTF-8: {exc.reason} at byte "
+                           f"{exc.start} ({bad})")
+    if isinstance(value, str):
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError as exc:
+            return value, f"the value {value[:40]!r} is not valid UTF-8: {exc.reason} at character {exc.start}"
+    return value, None
+
+
 def _keep_for_pythonfmu_handler(slave) -> None:
     """pythonfmu 0.7.0's exception handler releases the instance, its class and its log queue
     once more than it took them (and again when the instance is freed): take those references
@@ -722,7 +786,7 @@ def _fmi_entry(method, fallback, call: str):
     def entry(self, *args):
         try:
             return method(self, *args)
-        except Exception as exc:
+        except BaseException as exc:    # a KeyboardInterrupt too: an interruption (_report_failure)
             self._report_failure(exc, call)
             if not self._statuses:
                 _keep_for_pythonfmu_handler(self)

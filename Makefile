@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 FMU_SOURCES := $(shell find components -name '*.py' -o -name '*.urdf' -o -name '*.toml') system/build.py \
-               $(wildcard system/fmi_export/*.py system/fmi_export/*.c)
+               $(wildcard system/fmi_export/*.py system/fmi_export/*.c system/fmi_export/*.h)
 FMU_STAMP := fmus/.built
 
 .PHONY: venv fmus test demo bench bench-peers soak clean

@@ -159,7 +159,8 @@ def _container(args) -> int:
     from robofmu.system.container import export_container
 
     return _export("container", args, ".fmu",
-                   lambda system, out: export_container(system, out, algorithm=args.algorithm))
+                   lambda system, out: export_container(system, out, algorithm=args.algorithm,
+                                                        expose_signals=args.expose_signals))
 
 
 def _demo(args) -> int:
@@ -289,7 +290,10 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
 
     p = sub.add_parser("ssp", help="export an experiment as an SSP 1.0 package (.ssp)",
                        description="Write the experiment's diagram, FMUs and parameter sets as an SSP "
-                                   "1.0 package that libcosim and fmpy.ssp can run.")
+                                   "1.0 package that libcosim, ecos and fmpy.ssp can run. Its system and "
+                                   "components are named by identifiers every tool takes (chess-pd: chess_pd; "
+                                   "a letter first: 3rrp-circle: x3rrp_circle); the experiment's name is the "
+                                   "SSD's description.")
     p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
     p.add_argument("--out", metavar="FILE", help="output file (default: EXPERIMENT.ssp)")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
@@ -304,13 +308,17 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
                                    "without feedthrough first) or Jacobi (parallel mode), bit for bit for a PD "
                                    "loop (a PID's integral differs at first order in the step). The "
                                    "diagram's unwired inputs are its inputs (the experiment's values as start "
-                                   "values), its unwired outputs its outputs, the wired signals its locals, "
-                                   "all named BLOCK.VARIABLE.")
+                                   "values), its unwired outputs its outputs, the wired signals its locals "
+                                   "(its outputs instead with --expose-signals), all named BLOCK.VARIABLE.")
     p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
     p.add_argument("--out", metavar="FILE", help="output file (default: EXPERIMENT.fmu)")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")
     p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"],
                    help="the master algorithm to reproduce (default: the experiment's)")
+    p.add_argument("--expose-signals", action="store_true",
+                   help="declare the wired signals (plant.q[1], controller.tau[1], ...) as the container's "
+                        "outputs instead of its locals, for tools that record outputs only (fmusim's CSV); "
+                        "same names and values")
     p.set_defaults(func=_container)
 
     if _command(argv) == "step":

@@ -8,6 +8,13 @@ FMUs, sets the experiment's parameters as their start values, passes the wired v
 them at every step of its internal fixed step (the experiment's communication step) and steps
 them. Wires become the container's local variables, unwired outputs its outputs; both are
 named ``instance.variable`` as in the master's results (``plant.q[2]``, ``ik.reachable``).
+With ``expose_signals=True`` (``robofmu container --expose-signals``) the wired signals are
+outputs instead of locals, under the same names and value references, for importers that record
+outputs only (fmusim's CSV, ``fmpy.simulate_fmu``'s default, cosimtlk's ``read_outputs``): the
+toolbox declares a wire as a local, and export_container then turns each of those variables
+into an output in the container's modelDescription.xml (its ``ModelStructure`` listing them).
+The runtime reads the same storage either way, so the values are those of the locals, bit for
+bit (tests/test_container.py).
 
 How it schedules the blocks (measured equal to the master's runs bit for bit, every recorded
 output, on every robot: tests/test_container.py):
@@ -33,7 +40,25 @@ In both modes the container initializes the blocks in that order, each with the 
 of the blocks feeding it, so the loop starts consistent at t0, as the master's does.
 
 The embedded FMUs are robofmu's pythonfmu FMUs, so the process that runs the container needs
-what ``robofmu doctor`` lists (in a non-Python host: libpython preloaded, the venv on PATH).
+what ``robofmu doctor`` lists (a host that is not Python needs nothing: each block FMU loads the
+Python it records).
+
+What the container logs (fmu-manipulation-toolbox 2.0, its runtime ``container.so``)
+    The runtime logs ``Solver configure....`` with status fmi2Error at every fmi2Instantiate of a
+    successful run, whatever the importer's debug logging: a trace of its solver set-up, compiled
+    in (``container_configure()`` calls ``container_configure_c_locale()``, whose first statement
+    logs it through a logger fixed to status 3, before ``container.txt`` is read; the string at
+    0x4c400 of the wheel's ``resources/linux64/container.so``, logged by the call at 0x17212). No
+    container option, configuration file or log level reaches it, so export_container puts
+    robofmu's front library in front of the runtime (``system/fmi_export/robofmu_front.c``,
+    :func:`robofmu.system.fmi_export.install_front`): that message reaches the importer as what
+    it is, an fmi2OK message shown with debug logging only; every other message, status and
+    call is the runtime's. Hosts no longer report a bit-exact run as "1 error". Two lines come
+    unconditionally, as fmi2Warning: the version (``FMUContainer 'V2.0'``) and the mode
+    (``Container use SEQUENTIAL mode.``, ``Container use PARALLEL mode with MONO thread.``).
+    A block that refuses a call still reaches the host as fmi2Error with the block's own
+    message (``<block>.fmu: <instance>.<block>.fmu: ...``). The runtime's binaries for other
+    platforms are dropped, as the block FMUs it holds run on Linux x86_64 only.
 """
 from __future__ import annotations
 
@@ -41,10 +66,13 @@ import re
 import shutil
 import tempfile
 import time as _time
+import zipfile
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 import numpy as np
 
+from . import fmi_export
 from .check import Plan, plan, step_count
 from .diagram import System, select
 from .master import ALGORITHMS, SimulationError
@@ -86,7 +114,8 @@ def model_identifier(path: Path) -> str:
     return re.sub(r"\W|^(?=\d)", "_", Path(path).stem)
 
 
-def export_container(system: System, path: str | Path, algorithm: str | None = None) -> Path:
+def export_container(system: System, path: str | Path, algorithm: str | None = None,
+                     expose_signals: bool = False) -> Path:
     """Write ``system``'s diagram as one FMU container at ``path``; returns the path.
 
     The diagram is planned first as the master plans it (FMUs valid, wires typed and matching,
@@ -101,6 +130,10 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
         container's model identifier (:func:`model_identifier`).
     algorithm : {"gauss-seidel", "jacobi"}, optional
         The master algorithm the container reproduces (default: the experiment's).
+    expose_signals : bool
+        Declare the wired signals (``plant.q[1]``, ``controller.tau[2]``, ...) as the
+        container's outputs instead of its locals: same names, same value references, same
+        values (see the module notes). Default: locals, as the toolbox declares them.
 
     Raises
     ------
@@ -148,8 +181,55 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
         except FMUContainerError as exc:
             raise ValueError(f"{system.name}: fmu-manipulation-toolbox cannot build the container: "
                              f"{getattr(exc, 'reason', exc)}") from None
+        if expose_signals:
+            _locals_as_outputs(Path(folder) / path.name, [f"{block}.{output}" for block, output in sorted(sources)])
+        fmi_export.install_front(Path(folder) / path.name)
         shutil.move(Path(folder) / path.name, path)
     return path
+
+
+def _locals_as_outputs(fmu: Path, names: list[str]) -> None:
+    """Turn the local variables ``names`` of a container's modelDescription.xml into outputs, in
+    place: causality ``output``, listed (with the outputs already there, by ascending index) in
+    ``ModelStructure/Outputs`` and ``InitialUnknowns`` (FMI 2.0 sections 2.2.8: every output is
+    an output unknown, and an initial unknown when its ``initial`` is calculated). Nothing else in
+    the FMU changes: the runtime reads ``container.txt``, where a local's value reference maps to
+    the same storage whatever its causality."""
+    if not names:
+        return
+    with zipfile.ZipFile(fmu) as zf:
+        entries = [(info, zf.read(info)) for info in zf.infolist()]
+    md_info, text = next((info, data) for info, data in entries if info.filename == "modelDescription.xml")
+    root = ET.fromstring(text)
+    variables = root.find("ModelVariables").findall("ScalarVariable")
+    by_name = {v.get("name"): v for v in variables}
+    missing = [n for n in names if by_name.get(n) is None or by_name[n].get("causality") != "local"]
+    if missing:                    # the toolbox no longer names a wire's local after its source
+        raise ValueError(f"{fmu.name}: fmu-manipulation-toolbox declared no local variable for the wired "
+                         f"signals {', '.join(missing)}: cannot expose them as outputs")
+    for name in names:
+        by_name[name].set("causality", "output")
+    index = {id(v): k for k, v in enumerate(variables, start=1)}
+    outputs = sorted(index[id(v)] for v in variables if v.get("causality") == "output")
+    initial = sorted(index[id(v)] for v in variables if v.get("causality") == "output"
+                     and v.get("initial", "calculated") in ("approx", "calculated"))
+    structure = root.find("ModelStructure")
+    for tag, wanted, position in (("Outputs", outputs, 0), ("InitialUnknowns", initial, None)):
+        section = structure.find(tag)
+        kept = {} if section is None else {int(u.get("index")): u for u in section.findall("Unknown")}
+        if not wanted and not kept:
+            continue
+        if section is None:
+            section = ET.Element(tag)
+            structure.insert(len(structure) if position is None else position, section)
+        for unknown in list(section):
+            section.remove(unknown)
+        for k in sorted(set(wanted) | set(kept)):
+            section.append(kept.get(k, ET.Element("Unknown", {"index": str(k)})))
+    data = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    with zipfile.ZipFile(fmu, "w") as zf:
+        for info, content in entries:
+            zf.writestr(info, data if info is md_info else content)
 
 
 #: An embedded block's message as the container relays it: ``<block>.fmu: <instance>.<block>.fmu: text``.

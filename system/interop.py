@@ -59,8 +59,16 @@ class ToolRun:
     note: str = ""
 
 
-def _largest(tool: Result, master: Result, columns: list[str]) -> float:
-    return max((float(np.max(np.abs(tool[c] - master[c]))) for c in columns), default=0.0)
+def _largest(tool: Result, master: Result, columns: list[str], rename: dict[str, str] | None = None) -> float:
+    """Largest |tool - master| over ``columns`` (the tool's names); ``rename`` maps the tool's
+    instance names to the master's (an SSP component named apart from its block)."""
+    rename = rename or {}
+
+    def master_column(column: str) -> str:
+        instance, variable = column.split(".", 1)
+        return f"{rename.get(instance, instance)}.{variable}"
+
+    return max((float(np.max(np.abs(tool[c] - master[master_column(c)]))) for c in columns), default=0.0)
 
 
 def compare_tools(system: System, stop_time: float, folder: Path) -> list[ToolRun]:
@@ -72,7 +80,7 @@ def compare_tools(system: System, stop_time: float, folder: Path) -> list[ToolRu
         Container (Gauss-Seidel), container (Jacobi), libcosim, ecos, in that order.
     """
     from .container import export_container, run_container
-    from .ssp import export_ssp, run_ssp_ecos, run_ssp_libcosim
+    from .ssp import element_names, export_ssp, run_ssp_ecos, run_ssp_libcosim
 
     folder = Path(folder)
     h = system.step
@@ -87,12 +95,15 @@ def compare_tools(system: System, stop_time: float, folder: Path) -> list[ToolRu
         runs.append(ToolRun("container (fmpy)", algorithm, "every output", _largest(boxed, master, columns), seconds))
     q = system.extra["roles"]["q"]
     ssp = export_ssp(system, folder / f"{system.name}.ssp")
+    element = element_names([b.name for b in system.blocks])      # the SSD's component names
+    block = {name: b for b, name in element.items()}
+    instance, variable = q.split(".", 1)
     for tool, module, run in (("libcosim", "libcosimpy", run_ssp_libcosim), ("ecos", "ecospy", run_ssp_ecos)):
         if importlib.util.find_spec(module) is None:
             runs.append(ToolRun(tool, "jacobi", q, float("nan"), note=f"{module} is not installed (dev extra)"))
             continue
         start = time.perf_counter()
-        result = run(ssp, stop_time, h, record=[q])
-        runs.append(ToolRun(tool, "jacobi", q, _largest(result, masters["jacobi"], result.columns),
+        result = run(ssp, stop_time, h, record=[f"{element[instance]}.{variable}"])
+        runs.append(ToolRun(tool, "jacobi", q, _largest(result, masters["jacobi"], result.columns, block),
                             time.perf_counter() - start))
     return runs

@@ -19,6 +19,17 @@ tool applying one set by name (ecos) applies them all. Vector parameters (``q0 =
 expanded to ``q0[1]`` .. ``q0[n]``. Namespace prefixes are exactly ``ssd``, ``ssc``, ``ssv``:
 libcosim reads the SSD with boost::property_tree, which matches prefixed names literally.
 
+Names: the SSD (its root), its system and its components are named by identifiers that every
+tool takes (:func:`ssp_identifier`: ASCII letters, digits and underscores, starting with a
+letter, OMSimulator's rule ``^[a-zA-Z][a-zA-Z0-9_]*$``; SSP itself only asks for unique names).
+An experiment ``chess-pd`` gives the system (and the parameter sets) ``chess_pd``,
+``3rrp-circle`` gives ``x3rrp_circle``; the experiment's own name is the root's ``description``
+(the system's is the experiment's description). A block keeps its name when it is such an
+identifier (every block of the shipped experiments: ``plant``, ``ik``, ...); another is renamed
+the same way, made unique with ``_2``, ``_3``, .. (:func:`element_names`), and its component's
+``description`` holds the block's name. The runners name their columns after the components,
+``element.connector``.
+
 What the two importers support (fmpy 0.3.32, libcosimpy 0.0.6) and how the runners cope:
 
 fmpy.ssp (``fmpy.ssp.simulation.simulate_ssp``)
@@ -143,6 +154,39 @@ def parameter_values(block: str, variables: dict, parameters: dict) -> list[tupl
     return out
 
 
+_IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+
+
+def ssp_identifier(name: str) -> str:
+    """``name`` as an identifier every SSP tool takes: each character other than an ASCII letter,
+    digit or underscore becomes ``_``, and a name that then does not start with a letter gets an
+    ``x`` in front (``chess-pd``: ``chess_pd``; ``3rrp-circle``: ``x3rrp_circle``; ``_a``:
+    ``x_a``). Distinct names can give the same identifier: :func:`element_names` keeps them apart."""
+    text = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return text if _IDENTIFIER.fullmatch(text) else "x" + text
+
+
+def element_names(blocks: list[str]) -> dict[str, str]:
+    """The component name of each block (instance names, in diagram order): the block's own name
+    when it is already an identifier (:func:`ssp_identifier`'s rule), otherwise its identifier,
+    followed by ``_2``, ``_3``, .. if an earlier block (or a name kept as it is) has it already.
+    Deterministic, and injective."""
+    taken = {b for b in blocks if _IDENTIFIER.fullmatch(b)}
+    names: dict[str, str] = {}
+    for block in blocks:
+        if _IDENTIFIER.fullmatch(block):
+            names[block] = block
+            continue
+        base = name = ssp_identifier(block)
+        k = 1
+        while name in taken:
+            k += 1
+            name = f"{base}_{k}"
+        taken.add(name)
+        names[block] = name
+    return names
+
+
 def _parameter_set(parent, name: str, values) -> ET.Element:
     attrs = {"version": "1.0", "name": name}
     pset = ET.SubElement(parent, _q("ssv:ParameterSet"), attrs) if parent is not None \
@@ -193,9 +237,11 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
         sources[fmu] = name
 
     wired = {(link.target, link.input) for link in planned.links}
+    system_name = ssp_identifier(system.name)
+    element = element_names([spec.name for spec in system.blocks])
     root = ET.Element(_q("ssd:SystemStructureDescription"),
-                      {"version": "1.0", "name": system.name, "generationTool": "robofmu"})
-    sys_attrs = {"name": system.name}
+                      {"version": "1.0", "name": system_name, "description": system.name, "generationTool": "robofmu"})
+    sys_attrs = {"name": system_name}
     if system.description:
         sys_attrs["description"] = system.description
     sys_el = ET.SubElement(root, _q("ssd:System"), sys_attrs)
@@ -205,8 +251,11 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     for spec in system.blocks:
         node = planned.nodes[spec.name]
         fmu = system.fmu_path(spec).resolve()
+        attrs = {"name": element[spec.name]}
+        if element[spec.name] != spec.name:
+            attrs["description"] = spec.name
         comp = ET.SubElement(elements, _q("ssd:Component"),
-                             {"name": spec.name, "type": "application/x-fmu-sharedlibrary",
+                             {**attrs, "type": "application/x-fmu-sharedlibrary",
                               "source": f"resources/{sources[fmu]}", "implementation": "CoSimulation"})
         ports = [v for v in node.model_description.modelVariables
                  if v.causality == "output" or (v.causality == "input" and (spec.name, v.name) in wired)]
@@ -226,13 +275,13 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
         values = parameter_values(spec.name, node.variables, spec.parameters)
         if values:
             bindings = ET.SubElement(comp, _q("ssd:ParameterBindings"))
-            set_name = system.name          # one named set over the components (ecos applies sets by name)
+            set_name = system_name          # one named set over the components (ecos applies sets by name)
             if inline:
                 binding = ET.SubElement(bindings, _q("ssd:ParameterBinding"),
                                         {"type": "application/x-ssp-parameter-set"})
                 _parameter_set(ET.SubElement(binding, _q("ssd:ParameterValues")), set_name, values)
             else:
-                source = f"resources/{spec.name}.ssv"
+                source = f"resources/{element[spec.name]}.ssv"
                 ET.SubElement(bindings, _q("ssd:ParameterBinding"),
                               {"type": "application/x-ssp-parameter-set", "source": source})
                 ssv_files[source] = _xml_bytes(_parameter_set(None, set_name, values))
@@ -240,7 +289,8 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     connections = ET.SubElement(sys_el, _q("ssd:Connections")) if planned.links else None
     for src, out, dst, inp in planned.links:
         ET.SubElement(connections, _q("ssd:Connection"),
-                      {"startElement": src, "startConnector": out, "endElement": dst, "endConnector": inp})
+                      {"startElement": element[src], "startConnector": out, "endElement": element[dst],
+                       "endConnector": inp})
 
     used_units = {c.get("unit") for c in root.iter(_q("ssc:Real")) if c.get("unit")}
     if used_units:
@@ -298,8 +348,10 @@ def _fmpy_parameter_set(ssd):
                 value = coerce(p.type, p.value, f"{comp.name}.{p.name}")
                 out.parameters.append(Parameter(name=f"{comp.name}.{p.name}", type=p.type, value=value))
     # fmpy matches a parameter to a component by string prefix: "plant2.x" also starts with "plant"
-    clash = [(a, b) for a in names for b in names if a != b and b.startswith(a)]
-    if clash and out.parameters:
+    # (element_names makes such pairs: plant_1, plant_1_2), so it would set plant2's x on plant too
+    clash = [(a, p.name.split(".", 1)[0]) for p in out.parameters for a in names
+             if p.name.startswith(a) and not p.name.startswith(f"{a}.")]
+    if clash:
         raise NotImplementedError(f"fmpy.ssp would mix up the parameters of components {clash[0]}")
     return out
 

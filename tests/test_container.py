@@ -20,14 +20,17 @@ import pytest
 
 pytest.importorskip("fmu_manipulation_toolbox", reason="fmu-manipulation-toolbox is not installed")
 
-from fmpy import read_model_description  # noqa: E402
+from fmpy import read_model_description, simulate_fmu  # noqa: E402
+from fmpy.fmi1 import FMICallException  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
 from fmu_util import robot_experiments  # noqa: E402
 from robofmu.system import experiment  # noqa: E402
 from robofmu.system.check import Link, plan  # noqa: E402
-from robofmu.system.container import container_order, export_container, model_identifier, run_container  # noqa: E402
+from robofmu.system.container import (container_order, export_container,  # noqa: E402
+                                      model_identifier, run_container)
 from robofmu.system.master import Master, SimulationError  # noqa: E402
+from robofmu.system.validate import problems_of  # noqa: E402
 
 STOP = 0.5              # s
 ALGORITHMS = ["gauss-seidel", "jacobi"]
@@ -36,16 +39,41 @@ CLI = [sys.executable, "-m", "robofmu.system.cli"]
 
 @pytest.fixture(scope="module")
 def containers(fmu_root, tmp_path_factory):
-    """containers(name, algorithm) -> (System, container path), each built once."""
+    """containers(name, algorithm, expose_signals=False) -> (System, container path), each built once."""
     folder, cache = tmp_path_factory.mktemp("containers"), {}
 
-    def get(name, algorithm):
-        if (name, algorithm) not in cache:
+    def get(name, algorithm, expose_signals=False):
+        key = name, algorithm, expose_signals
+        if key not in cache:
             system = experiment.load(name, fmu_dir=fmu_root)
-            cache[name, algorithm] = system, export_container(system, folder / f"{name}-{algorithm}.fmu", algorithm)
-        return cache[name, algorithm]
+            out = folder / f"{name}-{algorithm}{'-exposed' if expose_signals else ''}.fmu"
+            cache[key] = system, export_container(system, out, algorithm, expose_signals=expose_signals)
+        return cache[key]
 
     return get
+
+
+def wired_signals(system) -> set[str]:
+    """``block.output`` of every wired output of the diagram (the sources of its links)."""
+    return {f"{link.source}.{link.output}" for link in plan(system).links}
+
+
+def logged(path, stop_time, **kwargs) -> tuple[list[tuple[int, str]], object]:
+    """Run a container with fmpy.simulate_fmu and a logger of our own (as a host does): the
+    messages as (fmi2Status, text), and the result (or the exception the run raised)."""
+    messages = []
+
+    def logger(env, instance, status, category, message):
+        messages.append((status, message.decode(errors="replace")))
+
+    try:
+        outcome = simulate_fmu(str(path), stop_time=stop_time, logger=logger, **kwargs)
+    except FMICallException as exc:
+        outcome = exc
+    return messages, outcome
+
+
+FMI2_OK, FMI2_WARNING, FMI2_ERROR, FMI2_FATAL = 0, 1, 3, 4
 
 
 @pytest.mark.parametrize("algorithm", ALGORITHMS)
@@ -190,3 +218,113 @@ def test_the_command_writes_a_container_and_answers_mistakes_in_one_line(fmu_roo
         assert failed.returncode == 2, failed.stderr
         assert failed.stderr.startswith("robofmu container: ") and message in failed.stderr
         assert len(failed.stderr.strip().splitlines()) == 1 and "Traceback" not in failed.stderr
+
+
+# -- what the container logs ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_a_successful_run_logs_no_error_level_message(containers, algorithm):
+    """fmu-manipulation-toolbox 2.0's runtime logs "Solver configure...." with status fmi2Error at
+    every instantiation (compiled in: see robofmu.system.container); robofmu's front library
+    passes it on as fmi2OK, with debug logging only. A successful run logs no error-level message,
+    debug logging off (a host's default) or on; the runtime's two warnings stay."""
+    system, path = containers("chess-pd", algorithm)
+    for debug in (False, True):
+        messages, result = logged(path, 0.05, step_size=system.step, output_interval=system.step,
+                                  debug_logging=debug)
+        assert not isinstance(result, Exception), result
+        assert len(result) == 51 and result["time"][-1] == pytest.approx(0.05, abs=1e-12)
+        assert [text for status, text in messages if status in (FMI2_ERROR, FMI2_FATAL)] == [], debug
+        chatter = [status for status, text in messages if text == "Solver configure...."]
+        assert chatter == ([FMI2_OK] if debug else []), (debug, chatter)
+        warnings = [text for status, text in messages if status == FMI2_WARNING]
+        assert warnings[0] == "FMUContainer 'V2.0'" and "mode" in warnings[1], warnings
+        assert len(messages) > 30 if debug else len(messages) <= 5              # the debug flag works
+
+
+def test_the_runtime_alone_logs_its_trace_as_an_error(containers, tmp_path):
+    """The negative control: the same container with the runtime put back in the front's place
+    logs "Solver configure...." as fmi2Error (what the front library is for)."""
+    import zipfile
+
+    from robofmu.system import fmi_export
+
+    system, path = containers("chess-pd", "jacobi")
+    bare = tmp_path / "bare.fmu"
+    with zipfile.ZipFile(path) as zin, zipfile.ZipFile(bare, "w") as zout:
+        identifier = model_identifier(path)
+        runtime = zin.read(f"binaries/linux64/{fmi_export.FRONT_BEHIND}")
+        for item in zin.infolist():
+            if item.filename == f"binaries/linux64/{identifier}.so":
+                zout.writestr(item, runtime)
+            elif item.filename != f"binaries/linux64/{fmi_export.FRONT_BEHIND}":
+                zout.writestr(item, zin.read(item.filename))
+    messages, result = logged(bare, 0.05, step_size=system.step, output_interval=system.step)
+    assert not isinstance(result, Exception), result
+    assert [text for status, text in messages if status == FMI2_ERROR] == ["Solver configure...."]
+
+
+def test_a_refused_step_still_logs_its_error(fmu_root, tmp_path):
+    """An infinite torque: the plant refuses its step at t = 1 ms; the host gets fmi2Error with the
+    plant's own words (those the master reports), after the runtime's known line."""
+    broken = experiment.with_parameters(experiment.load("chess-pd", fmu_dir=fmu_root), {"controller.kd": 1e308})
+    with pytest.raises(SimulationError) as master:
+        Master(broken).run(0.05, broken.step)
+    path = export_container(broken, tmp_path / "bad.fmu", "gauss-seidel")
+    messages, outcome = logged(path, 0.05, step_size=broken.step, output_interval=broken.step)
+    assert isinstance(outcome, FMICallException)
+    errors = [text for status, text in messages if status == FMI2_ERROR]
+    assert (master.value.block, master.value.time) == ("plant", 0.001)
+    words = master.value.reason.rsplit("plant: ", 1)[-1]                     # the block's own words
+    assert len(words) > 20
+    refused = [text for text in errors if text.startswith("plant.fmu: ") and text.endswith(words)]
+    assert len(refused) == 1, errors
+
+
+# -- the wired signals as outputs ----------------------------------------------------------------------------
+@pytest.mark.parametrize("name", robot_experiments())
+def test_exposed_signals_are_outputs_equal_to_the_locals_bit_for_bit(containers, name):
+    """With expose_signals every wired signal is an output (none is left a local), the inputs and
+    the other outputs are unchanged, the FMU is valid for both checkers, and a run records the
+    same values as the container without the option records in its locals. An output-only
+    recorder (fmpy.simulate_fmu's default) then sees them; without the option it sees none."""
+    system, plain = containers(name, "gauss-seidel")
+    _, exposed = containers(name, "gauss-seidel", expose_signals=True)
+    wired = wired_signals(system)
+    assert len(wired) >= 10 and "plant.q[1]" in wired and "controller.tau[1]" in wired
+    before, after = (read_model_description(str(p)) for p in (plain, exposed))
+    causality = lambda md, c: {v.name for v in md.modelVariables if v.causality == c}     # noqa: E731
+    assert causality(before, "local") == wired                                 # as today
+    assert causality(after, "local") == set()
+    assert causality(after, "output") == causality(before, "output") | wired
+    assert causality(after, "input") == causality(before, "input")
+    listed = [v.name for v in after.modelVariables if v.causality == "output"]
+    assert [u.variable.name for u in after.outputs] == listed                 # ModelStructure/Outputs
+    assert [u.variable.name for u in after.initialUnknowns] == listed          # all calculated at start
+    by_name = {v.name: v.valueReference for v in before.modelVariables}
+    assert all(v.valueReference == by_name[v.name] for v in after.modelVariables)   # same storage
+    assert problems_of(exposed) == []                                          # fmpy and fmutool -check
+
+    h, stop = system.step, STOP
+    locals_run, outputs_run = run_container(plain, stop, h), run_container(exposed, stop, h)
+    assert outputs_run.columns == locals_run.columns
+    np.testing.assert_array_equal(outputs_run.data, locals_run.data)
+    recorded = simulate_fmu(str(exposed), stop_time=stop, step_size=h, output_interval=h)      # outputs only
+    assert wired <= set(recorded.dtype.names)
+    for column in wired:
+        np.testing.assert_array_equal(recorded[column].astype(float), locals_run[column], err_msg=column)
+    assert not wired & set(simulate_fmu(str(plain), stop_time=10 * h, step_size=h, output_interval=h).dtype.names)
+    moving = [c for c in wired if np.ptp(locals_run[c]) > 0]
+    assert "plant.q[1]" in moving or "plant.q[2]" in moving                    # not vacuous: the arm moves
+
+
+def test_the_command_exposes_the_signals_on_request(fmu_root, tmp_path):
+    out = tmp_path / "rrp.fmu"
+    done = subprocess.run([*CLI, "container", "rrp-line", "--fmus", str(fmu_root), "--out", str(out),
+                           "--expose-signals"], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    md = read_model_description(str(out))
+    system = experiment.load("rrp-line", fmu_dir=fmu_root)
+    assert wired_signals(system) <= {v.name for v in md.modelVariables if v.causality == "output"}
+    assert not [v.name for v in md.modelVariables if v.causality == "local"]
+    helped = subprocess.run([*CLI, "container", "--help"], capture_output=True, text=True, cwd=tmp_path)
+    assert "--expose-signals" in helped.stdout and "outputs instead of its locals" in " ".join(helped.stdout.split())

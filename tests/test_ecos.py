@@ -14,6 +14,9 @@ component, so the loop starts consistent. Hence, on one PD experiment per robot:
 """
 from __future__ import annotations
 
+import zipfile
+from xml.etree import ElementTree as ET
+
 import numpy as np
 import pytest
 
@@ -21,7 +24,7 @@ from fmu_util import robot_experiments
 from robofmu.system import experiment
 from robofmu.system.check import plan
 from robofmu.system.master import Master, SimulationError
-from robofmu.system.ssp import export_ssp, load_ecospy, run_ssp_ecos
+from robofmu.system.ssp import NS, export_ssp, load_ecospy, run_ssp_ecos, ssd_text
 
 try:
     load_ecospy()
@@ -74,13 +77,19 @@ def test_ecos_reproduces_the_master_in_jacobi_mode(packages, name):
     assert np.max(np.abs(gauss_seidel.vector("plant.q") - jacobi.vector("plant.q")[:len(gauss_seidel.time)])) > 1e-9
 
 
-def test_ecos_applies_the_packages_parameter_set(packages, fmu_root, tmp_path):
+@pytest.mark.parametrize("name, system_name", [("rrp-line", "rrp_line"), ("3rrp-circle", "x3rrp_circle")])
+def test_ecos_applies_the_packages_parameter_set(packages, fmu_root, tmp_path, name, system_name):
     """A package whose controller gains differ from the experiment's: ecos's run follows them, so
-    the SSV set (named after the system) is applied at initialization."""
-    system, _ = packages("rrp-line")
+    the SSV set (named after the system, the experiment's name as an identifier) is applied at
+    initialization."""
+    system, _ = packages(name)
     controller = next(b for b in system.blocks if b.name == "controller")
     softer = experiment.with_parameters(system, {"controller.kp": controller.parameters.get("kp", 400.0) / 4})
     path = export_ssp(softer, tmp_path / "softer.ssp")
+    root = ET.fromstring(ssd_text(path))
+    assert (root.find("ssd:System", NS).get("name"), root.get("description")) == (system_name, name)
+    with zipfile.ZipFile(path) as zf:
+        assert ET.fromstring(zf.read("resources/controller.ssv")).get("name") == system_name
     ecos = run_ssp_ecos(path, STOP, system.step)
     np.testing.assert_allclose(ecos.vector("plant.q"), Master(softer).run(STOP, system.step, "jacobi").vector("plant.q"),
                                rtol=0, atol=1e-12)

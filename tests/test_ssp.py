@@ -42,6 +42,7 @@ halves from 1 ms to 0.5 ms (measured ratios 0.496 .. 0.500).
 from __future__ import annotations
 
 import math
+import re
 import zipfile
 from xml.etree import ElementTree as ET
 
@@ -51,9 +52,11 @@ import pytest
 from robofmu.components.control import ComputedTorque
 from robofmu.components.ik import make_solver
 from robofmu.components.robots import load_description, load_model
+from robofmu.system import experiment as experiments
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
-from robofmu.system.ssp import NS, export_ssp, run_ssp_fmpy, run_ssp_libcosim, ssd_text
+from robofmu.system.ssp import (NS, element_names, export_ssp, run_ssp_fmpy, run_ssp_libcosim, ssd_text,
+                                ssp_identifier)
 
 STOP = 2.0                  # s: chess: first move (0-1 s), pause, start of the second move
 STEPS = (1e-3, 5e-4)        # s
@@ -154,6 +157,10 @@ def joint_diff(a, b, name="plant.q"):
 
 # -- the package ------------------------------------------------------------------------------------------
 STOP_TIMES = {"chess-pd": 13.0, "rrp-line": 3.0, "rpp-bangbang": 2.0, "3rrp-circle": 5.0}       # s, the experiments' own
+#: The SSD's system name of each experiment: an identifier OMSimulator takes (``^[a-zA-Z][a-zA-Z0-9_]*$``)
+SYSTEM_NAMES = {"chess-pd": "chess_pd", "rrp-line": "rrp_line", "rpp-bangbang": "rpp_bangbang",
+                "3rrp-circle": "x3rrp_circle"}
+OMSIMULATOR_IDENT = r"[a-zA-Z][a-zA-Z0-9_]*"        # OMSimulator's ComRef::isValidIdent
 
 
 @pytest.mark.parametrize("name", EXPERIMENTS)
@@ -170,7 +177,8 @@ def test_ssd_is_well_formed_with_components_connectors_and_connections(systems, 
 
     root = ET.fromstring(ssd_text(ssp))                                   # well-formed XML
     assert root.tag == f"{{{NS['ssd']}}}SystemStructureDescription"
-    assert (root.get("version"), root.get("name")) == ("1.0", name)
+    assert (root.get("version"), root.get("name"), root.get("description")) == ("1.0", SYSTEM_NAMES[name], name)
+    assert root.find("ssd:System", NS).get("name") == SYSTEM_NAMES[name]
     components = root.findall("ssd:System/ssd:Elements/ssd:Component", NS)
     assert [c.get("name") for c in components] == blocks
     assert [c.get("source") for c in components] == [f"resources/{b}.fmu" for b in blocks]
@@ -220,6 +228,7 @@ def test_ssd_is_well_formed_with_components_connectors_and_connections(systems, 
     assert binding.get("source") == "resources/controller.ssv"
     with zipfile.ZipFile(ssp) as zf:
         ssv = ET.fromstring(zf.read("resources/controller.ssv"))
+    assert ssv.get("name") == SYSTEM_NAMES[name]                          # the set ecos applies by name
     values = {p.get("name"): float(p.find("ssv:Real", NS).get("value"))
               for p in ssv.findall("ssv:Parameters/ssv:Parameter", NS)}
     payload = {} if description.payload is None else {"payload_mass": description.payload.mass}
@@ -244,6 +253,82 @@ def test_ssd_and_ssv_validate_against_the_ssp_schemas(systems, packages, tmp_pat
         assert {p.name: float(p.value) for p in pset.parameters}["kp"] == 400.0
     with zipfile.ZipFile(tmp_path / "inline.ssp") as zf:
         assert not [n for n in zf.namelist() if n.endswith(".ssv")]
+
+
+def test_identifiers_for_the_ssd_names():
+    assert ssp_identifier("chess-pd") == "chess_pd"
+    assert ssp_identifier("3rrp-circle") == "x3rrp_circle"
+    assert ssp_identifier("rrp_offset-nr") == "rrp_offset_nr"
+    assert ssp_identifier("_plant") == "x_plant"
+    assert ssp_identifier("plänt 2.b") == "pl_nt_2_b"
+    assert ssp_identifier("") == "x"
+    assert ssp_identifier("plant") == "plant"
+    # kept when already identifiers; the others made unique after them, in diagram order
+    assert element_names(["plant-1", "plant_1", "ik", "plant.1", "2nd"]) == \
+        {"plant-1": "plant_1_2", "plant_1": "plant_1", "ik": "ik", "plant.1": "plant_1_3", "2nd": "x2nd"}
+    assert element_names(["a-b", "a_b_2", "a.b"]) == {"a-b": "a_b", "a_b_2": "a_b_2", "a.b": "a_b_3"}
+
+
+@pytest.mark.parametrize("name", experiments.available())
+def test_every_experiments_ssd_names_are_identifiers(fmu_root, tmp_path, name):
+    """Every shipped experiment: the root and the system carry the experiment's name as an
+    identifier every tool takes (OMSimulator's rule: a letter first), the experiment's own name is
+    the SSD's description, the components are the blocks (all identifiers already), the
+    connections name them, and every parameter set carries the system's name."""
+    system = load(name, fmu_dir=fmu_root)
+    path = export_ssp(system, tmp_path / "x.ssp")
+    root = ET.fromstring(ssd_text(path))
+    expected = name.replace("-", "_")
+    expected = expected if expected[0].isalpha() else "x" + expected
+    assert (root.get("name"), root.get("description")) == (expected, name)
+    assert re.fullmatch(OMSIMULATOR_IDENT, expected)
+    sys_el = root.find("ssd:System", NS)
+    assert sys_el.get("name") == expected
+    assert sys_el.get("description") == (system.description or None)
+    components = [c.get("name") for c in sys_el.findall("ssd:Elements/ssd:Component", NS)]
+    assert components == [b.name for b in system.blocks]
+    assert all(re.fullmatch(OMSIMULATOR_IDENT, c) for c in components)
+    ends = {c.get(k) for c in sys_el.findall("ssd:Connections/ssd:Connection", NS) for k in ("startElement", "endElement")}
+    assert ends and ends <= set(components)
+    with zipfile.ZipFile(path) as zf:
+        sets = [ET.fromstring(zf.read(n)).get("name") for n in zf.namelist() if n.endswith(".ssv")]
+    assert sets and set(sets) == {expected}
+
+
+def test_blocks_that_are_no_identifiers_get_component_names_the_runners_use(fmu_root, tmp_path):
+    """Lone plants named "plant-1", "plant_1" and "2nd plant": the components are plant_1_2,
+    plant_1 and x2nd_plant (each renamed one with its block's name as description, its .ssv after
+    the component), libcosim and fmpy.ssp name their columns after them, and each plant runs
+    as the master runs the block: the one given another q0 falls from there."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
+    from robofmu.system.diagram import BlockSpec, System
+
+    q0 = load_model("chess").configuration("home") + np.array([0.0, 0.1, 0.0, 0.0])
+    blocks = [BlockSpec("plant-1", "chess/plant.fmu"), BlockSpec("plant_1", "chess/plant.fmu"),
+              BlockSpec("2nd plant", "chess/plant.fmu", {"q0": q0.tolist()})]
+    lone = System(blocks, [], fmu_dir=fmu_root, name="3 plants", stop_time=0.01)
+    path = export_ssp(lone, tmp_path / "plants.ssp")
+    root = ET.fromstring(ssd_text(path))
+    assert (root.get("name"), root.get("description")) == ("x3_plants", "3 plants")
+    components = root.findall("ssd:System/ssd:Elements/ssd:Component", NS)
+    assert [(c.get("name"), c.get("description")) for c in components] == \
+        [("plant_1_2", "plant-1"), ("plant_1", None), ("x2nd_plant", "2nd plant")]
+    with zipfile.ZipFile(path) as zf:
+        assert [n for n in zf.namelist() if n.endswith(".ssv")] == ["resources/x2nd_plant.ssv"]
+        assert ET.fromstring(zf.read("resources/x2nd_plant.ssv")).get("name") == "x3_plants"
+    master = Master(lone).run(0.005, 1e-3, "jacobi")
+    lc, fm = run_ssp_libcosim(path, 0.005, 1e-3), run_ssp_fmpy(path, 0.005, 1e-3)
+    for element, block in (("plant_1_2", "plant-1"), ("plant_1", "plant_1"), ("x2nd_plant", "2nd plant")):
+        np.testing.assert_allclose(lc.vector(f"{element}.q"), master.vector(f"{block}.q"), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fm.vector(f"{element}.q"), master.vector(f"{block}.q")[1:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lc.vector("x2nd_plant.q")[0], q0, rtol=0, atol=1e-15)      # its parameter set
+    assert np.max(np.abs(lc.vector("x2nd_plant.q")[0] - lc.vector("plant_1.q")[0])) == pytest.approx(0.1)
+    # fmpy.ssp gives a component the parameters whose names start with its name: plant_1_2's q0
+    # would reach plant_1 too, so run_ssp_fmpy refuses that package
+    blocks[0] = BlockSpec("plant-1", "chess/plant.fmu", {"q0": q0.tolist()})
+    clashing = export_ssp(System(blocks, [], fmu_dir=fmu_root, name="3 plants"), tmp_path / "clash.ssp")
+    with pytest.raises(NotImplementedError, match=r"mix up the parameters of components \('plant_1', 'plant_1_2'\)"):
+        run_ssp_fmpy(clashing, 0.005, 1e-3)
 
 
 def test_parameter_bindings_reach_the_fmus(fmu_dir, tmp_path):

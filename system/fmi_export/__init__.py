@@ -56,10 +56,15 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree
 
-__all__ = ["MARKER", "RUNTIME_RECORD", "STATUS_CATEGORY", "STOCK_LIBRARY", "FmiExportError", "library", "install", "installed",
-           "read_runtime", "runtime_record"]
+__all__ = ["MARKER", "RUNTIME_RECORD", "STATUS_CATEGORY", "STOCK_LIBRARY", "FmiExportError", "library", "install",
+           "install_front", "installed", "read_runtime", "runtime_record"]
 
 SOURCE = Path(__file__).resolve().parent / "robofmu_fmi2.c"
+#: The front of a FMU container's runtime (:func:`install_front`), and the runtime's name behind it.
+FRONT_SOURCE = SOURCE.with_name("robofmu_front.c")
+FRONT_BEHIND = "libcontainer-runtime.so"
+#: The FMI types and the forwarded functions both libraries share.
+HEADER = SOURCE.with_name("fmi2_forward.h")
 #: A message logged with this category sets the status of the FMI call it is logged in.
 STATUS_CATEGORY = "robofmu:status"
 #: pythonfmu's export library, beside robofmu's in ``binaries/linux64``.
@@ -79,10 +84,10 @@ class FmiExportError(RuntimeError):
 
 
 def forwarded_functions() -> list[str]:
-    """The FMI functions robofmu's library takes from pythonfmu's (the C source's list)."""
-    names = re.findall(r"^\s*X\([^,]+,\s*(fmi2\w+)\s*,", SOURCE.read_text(), flags=re.M)
+    """The FMI functions robofmu's libraries take from the library behind them (the C header's list)."""
+    names = re.findall(r"^\s*X\([^,]+,\s*(fmi2\w+)\s*,", HEADER.read_text(), flags=re.M)
     if not names:
-        raise FmiExportError(f"{SOURCE}: no forwarded FMI functions found")
+        raise FmiExportError(f"{HEADER}: no forwarded FMI functions found")
     return names
 
 
@@ -126,8 +131,9 @@ def _cache_dir() -> Path:
     raise FmiExportError("robofmu build: no writable folder for the compiled FMI export library")
 
 
-def library(log=None) -> Path:
-    """robofmu's export library for ``binaries/linux64``, compiled if not cached yet.
+def library(log=None, source: Path = SOURCE) -> Path:
+    """robofmu's export library for ``binaries/linux64`` (or, with ``source=FRONT_SOURCE``, the
+    front of a FMU container's runtime), compiled if not cached yet.
 
     Raises :class:`FmiExportError` (with the compiler's output) if it cannot be compiled.
     """
@@ -139,14 +145,14 @@ def library(log=None) -> Path:
         version = subprocess.run(cc + ["--version"], capture_output=True, text=True, timeout=60).stdout
     except (OSError, subprocess.SubprocessError) as exc:
         raise FmiExportError(f"robofmu build: the C compiler {shlex.join(cc)} does not run: {exc}") from None
-    source = SOURCE.read_bytes()
-    key = hashlib.sha256(b"\0".join([source, shlex.join(cc + _FLAGS + _LIBS).encode(), version.encode()]))
-    target = _cache_dir() / key.hexdigest()[:16] / "robofmu_fmi2.so"
+    key = hashlib.sha256(b"\0".join([source.read_bytes(), HEADER.read_bytes(), shlex.join(cc + _FLAGS + _LIBS).encode(),
+                                     version.encode()]))
+    target = _cache_dir() / key.hexdigest()[:16] / f"{source.stem}.so"
     if target.is_file():
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
     partial = target.with_name(f".{target.name}.{os.getpid()}")
-    command = cc + _FLAGS + ["-o", str(partial), str(SOURCE)] + _LIBS
+    command = cc + _FLAGS + ["-o", str(partial), str(source)] + _LIBS
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=300)
     except (OSError, subprocess.SubprocessError) as exc:
@@ -159,7 +165,7 @@ def library(log=None) -> Path:
             f"  {shlex.join(command)}\n{done.stderr.strip() or done.stdout.strip()}")
     os.replace(partial, target)
     if log is not None:
-        log(f"compiled robofmu's FMI export library: {target}")
+        log(f"compiled robofmu's FMI library {source.name}: {target}")
     return target
 
 
@@ -232,22 +238,40 @@ def install(fmu: str | Path, ours: Path | None = None) -> None:
     the platforms robofmu's library is built for. ``resources/robofmu_python.txt`` records
     this process's Python runtime (:func:`runtime_record`), for hosts that are not Python.
     """
-    path = Path(fmu)
-    ours = library() if ours is None else Path(ours)
+    _put_in_front(Path(fmu), library() if ours is None else Path(ours), STOCK_LIBRARY,
+                  "pythonfmu's export library", "pythonfmu 0.7.0",
+                  {f"resources/{RUNTIME_RECORD}": _record_text(runtime_record()).encode()})
+
+
+def install_front(fmu: str | Path) -> None:
+    """Put robofmu's front library (``robofmu_front.c``) into a FMU container that
+    fmu-manipulation-toolbox has just built (in place): its runtime moves to
+    ``binaries/linux64/libcontainer-runtime.so``, the front takes its name and relays its
+    messages, the one it logs as an error on every run downgraded (``robofmu_front.c``). The
+    runtime's binaries for other platforms are dropped: the block FMUs it holds run on Linux
+    x86_64 only."""
+    _put_in_front(Path(fmu), library(source=FRONT_SOURCE), FRONT_BEHIND, "the container runtime",
+                  "fmu-manipulation-toolbox 2.0", {})
+
+
+def _put_in_front(path: Path, ours: Path, behind: str, what: str, written_for: str,
+                  extra: dict[str, bytes]) -> None:
+    """``binaries/linux64/<modelIdentifier>.so`` of the FMU at ``path`` moves to ``behind``,
+    ``ours`` takes its name; other platforms' binaries are dropped; ``extra`` entries added."""
     with zipfile.ZipFile(path) as z:
         identifier = _model_identifier(z, path)
         entry = f"binaries/{PLATFORM}/{identifier}.so"
-        stock_entry = f"binaries/{PLATFORM}/{STOCK_LIBRARY}"
+        behind_entry = f"binaries/{PLATFORM}/{behind}"
         names = z.namelist()
-        if stock_entry in names:
-            raise FmiExportError(f"{path}: robofmu's export library is already in it")
+        if behind_entry in names:
+            raise FmiExportError(f"{path}: a robofmu library is already in front of {what}")
         if entry not in names:
-            raise FmiExportError(f"{path}: no {entry}: pythonfmu's builder did not put its library in")
-        stock = z.read(entry)
-        missing = [name for name in forwarded_functions() if name.encode() + b"\0" not in stock]
+            raise FmiExportError(f"{path}: no {entry}: its builder did not put {what} in")
+        theirs = z.read(entry)
+        missing = [name for name in forwarded_functions() if name.encode() + b"\0" not in theirs]
         if missing:
-            raise FmiExportError(f"{path}: pythonfmu's export library lacks {', '.join(missing)}; robofmu's "
-                                 "export library (system/fmi_export) was written for pythonfmu 0.7.0")
+            raise FmiExportError(f"{path}: {what} lacks {', '.join(missing)}; robofmu's library in front of it "
+                                 f"(system/fmi_export) was written for {written_for}")
         entries = [(info, z.read(info.filename)) for info in z.infolist()]
     partial = path.with_name(f".{path.name}.{os.getpid()}.partial")
     try:
@@ -255,13 +279,11 @@ def install(fmu: str | Path, ours: Path | None = None) -> None:
             for info, data in entries:
                 if info.filename == entry:
                     out.writestr(info, ours.read_bytes())
-                    out.writestr(_beside(info, stock_entry), stock)
-                elif info.filename.startswith("binaries/") and not info.filename.startswith(f"binaries/{PLATFORM}/"):
-                    continue
-                else:
+                    out.writestr(_beside(info, behind_entry), theirs)
+                elif not info.filename.startswith("binaries/") or info.filename.startswith(f"binaries/{PLATFORM}/"):
                     out.writestr(info, data)
-                    if info.filename == "resources/slavemodule.txt":
-                        out.writestr(_beside(info, f"resources/{RUNTIME_RECORD}"), _record_text(runtime_record()))
+            for name, data in extra.items():
+                out.writestr(_beside(entries[0][0], name), data)
         os.replace(partial, path)
     finally:
         partial.unlink(missing_ok=True)

@@ -135,80 +135,11 @@
 #define STOCK_LIBRARY "libpythonfmu-export.so"
 #define STATUS_CATEGORY "robofmu:status"
 
-/* -- FMI 2.0 types (fmi2TypesPlatform.h, fmi2FunctionTypes.h of the standard) -------------- */
-#ifdef ROBOFMU_CHECK_WITH_FMI2_HEADERS
-/* Compiled against the standard's headers instead (tests/test_fmi_status.py does, with the
-   copy fmpy ships), every definition below is checked against the standard's prototypes. */
-#include "fmi2Functions.h"
-#else
-typedef void* fmi2Component;
-typedef void* fmi2ComponentEnvironment;
-typedef void* fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef char fmi2Char;
-typedef const fmi2Char* fmi2String;
-typedef char fmi2Byte;
-#define fmi2True 1
-
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
-
-typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String instanceName, fmi2Status,
-                                   fmi2String category, fmi2String message, ...);
-typedef void* (*fmi2CallbackAllocateMemory)(size_t nobj, size_t size);
-typedef void (*fmi2CallbackFreeMemory)(void* obj);
-typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
-
-typedef struct {
-    fmi2CallbackLogger logger;
-    fmi2CallbackAllocateMemory allocateMemory;
-    fmi2CallbackFreeMemory freeMemory;
-    fmi2StepFinished stepFinished;
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
-#endif
-
-/* -- pythonfmu's library ------------------------------------------------------------------- */
-#define STOCK_FUNCTIONS(X) \
-    X(fmi2Component, fmi2Instantiate, (fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*, fmi2Boolean, fmi2Boolean)) \
-    X(void, fmi2FreeInstance, (fmi2Component)) \
-    X(fmi2Status, fmi2SetupExperiment, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real)) \
-    X(fmi2Status, fmi2EnterInitializationMode, (fmi2Component)) \
-    X(fmi2Status, fmi2ExitInitializationMode, (fmi2Component)) \
-    X(fmi2Status, fmi2Terminate, (fmi2Component)) \
-    X(fmi2Status, fmi2Reset, (fmi2Component)) \
-    X(fmi2Status, fmi2GetReal, (fmi2Component, const fmi2ValueReference*, size_t, fmi2Real*)) \
-    X(fmi2Status, fmi2GetInteger, (fmi2Component, const fmi2ValueReference*, size_t, fmi2Integer*)) \
-    X(fmi2Status, fmi2GetBoolean, (fmi2Component, const fmi2ValueReference*, size_t, fmi2Boolean*)) \
-    X(fmi2Status, fmi2GetString, (fmi2Component, const fmi2ValueReference*, size_t, fmi2String*)) \
-    X(fmi2Status, fmi2SetReal, (fmi2Component, const fmi2ValueReference*, size_t, const fmi2Real*)) \
-    X(fmi2Status, fmi2SetInteger, (fmi2Component, const fmi2ValueReference*, size_t, const fmi2Integer*)) \
-    X(fmi2Status, fmi2SetBoolean, (fmi2Component, const fmi2ValueReference*, size_t, const fmi2Boolean*)) \
-    X(fmi2Status, fmi2SetString, (fmi2Component, const fmi2ValueReference*, size_t, const fmi2String*)) \
-    X(fmi2Status, fmi2GetFMUstate, (fmi2Component, fmi2FMUstate*)) \
-    X(fmi2Status, fmi2SetFMUstate, (fmi2Component, fmi2FMUstate)) \
-    X(fmi2Status, fmi2FreeFMUstate, (fmi2Component, fmi2FMUstate*)) \
-    X(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t*)) \
-    X(fmi2Status, fmi2SerializeFMUstate, (fmi2Component, fmi2FMUstate, fmi2Byte*, size_t)) \
-    X(fmi2Status, fmi2DeSerializeFMUstate, (fmi2Component, const fmi2Byte*, size_t, fmi2FMUstate*)) \
-    X(fmi2Status, fmi2GetDirectionalDerivative, (fmi2Component, const fmi2ValueReference*, size_t, const fmi2ValueReference*, size_t, const fmi2Real*, fmi2Real*)) \
-    X(fmi2Status, fmi2SetRealInputDerivatives, (fmi2Component, const fmi2ValueReference*, size_t, const fmi2Integer*, const fmi2Real*)) \
-    X(fmi2Status, fmi2GetRealOutputDerivatives, (fmi2Component, const fmi2ValueReference*, size_t, const fmi2Integer*, fmi2Real*)) \
-    X(fmi2Status, fmi2DoStep, (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean)) \
-    X(fmi2Status, fmi2CancelStep, (fmi2Component)) \
-    X(fmi2Status, fmi2GetStatus, (fmi2Component, const fmi2StatusKind, fmi2Status*)) \
-    X(fmi2Status, fmi2GetRealStatus, (fmi2Component, const fmi2StatusKind, fmi2Real*)) \
-    X(fmi2Status, fmi2GetIntegerStatus, (fmi2Component, const fmi2StatusKind, fmi2Integer*)) \
-    X(fmi2Status, fmi2GetBooleanStatus, (fmi2Component, const fmi2StatusKind, fmi2Boolean*)) \
-    X(fmi2Status, fmi2GetStringStatus, (fmi2Component, const fmi2StatusKind, fmi2String*))
+#include "fmi2_forward.h"       /* the FMI 2.0 types and FORWARDED_FUNCTIONS, pythonfmu's library's */
 
 static struct {
 #define FIELD(ret, name, params) ret (*name) params;
-    STOCK_FUNCTIONS(FIELD)
+    FORWARDED_FUNCTIONS(FIELD)
 #undef FIELD
 } stock;
 
@@ -292,26 +223,9 @@ static void guard_stock_exit(void* handle, const char* path)
    Python symbols must be in the process already (ensure_runtime). */
 static int load_stock(char* error, size_t size)
 {
-    Dl_info self;
-    if (!dladdr((void*)&load_stock, &self) || self.dli_fname == NULL) {
-        snprintf(error, size, "cannot find the folder of this library");
-        return 0;
-    }
-    const char* slash = strrchr(self.dli_fname, '/');
-    size_t dir = slash ? (size_t)(slash - self.dli_fname) + 1 : 0;
     char path[4096];
-    if (dir + sizeof STOCK_LIBRARY > sizeof path) {
-        snprintf(error, size, "the path of %.4000s is too long", self.dli_fname);
-        return 0;
-    }
-    memcpy(path, self.dli_fname, dir);
-    memcpy(path + dir, STOCK_LIBRARY, sizeof STOCK_LIBRARY);
-    void* handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (handle == NULL) {
-        const char* why = dlerror();
-        snprintf(error, size, "cannot load %.4000s: %.3000s", path, why ? why : "unknown error");
-        return 0;
-    }
+    void* handle = load_beside((const void*)&load_stock, STOCK_LIBRARY, path, sizeof path, error, size);
+    if (handle == NULL) return 0;
 #define RESOLVE(ret, name, params)                                                            \
     *(void**)(&stock.name) = dlsym(handle, #name);                                            \
     if (stock.name == NULL) {                                                                 \
@@ -319,7 +233,7 @@ static int load_stock(char* error, size_t size)
         dlclose(handle);                                                                      \
         return 0;                                                                             \
     }
-    STOCK_FUNCTIONS(RESOLVE)
+    FORWARDED_FUNCTIONS(RESOLVE)
 #undef RESOLVE
     guard_stock_exit(handle, path);
     stock_handle = handle;
@@ -1034,7 +948,80 @@ FORWARD_VALUES(fmi2GetInteger, fmi2Integer)
 FORWARD_VALUES(fmi2GetString, fmi2String)
 FORWARD_VALUES(fmi2SetInteger, const fmi2Integer)
 FORWARD_VALUES(fmi2SetBoolean, const fmi2Boolean)
-FORWARD_VALUES(fmi2SetString, const fmi2String)
+
+/* Whether text is well-formed UTF-8, by the rules of CPython's strict decoder (Unicode 3-7). */
+static int utf8_valid(const unsigned char* p)
+{
+    while (*p) {
+        unsigned char c = *p;
+        int n;
+        unsigned char low = 0x80, high = 0xBF;
+        if (c < 0x80) { ++p; continue; }
+        else if (c >= 0xC2 && c <= 0xDF) n = 1;
+        else if (c == 0xE0) { n = 2; low = 0xA0; }
+        else if (c >= 0xE1 && c <= 0xEC) n = 2;
+        else if (c == 0xED) { n = 2; high = 0x9F; }
+        else if (c >= 0xEE && c <= 0xEF) n = 2;
+        else if (c == 0xF0) { n = 3; low = 0x90; }
+        else if (c >= 0xF1 && c <= 0xF3) n = 3;
+        else if (c == 0xF4) { n = 3; high = 0x8F; }
+        else return 0;
+        if (p[1] < low || p[1] > high) return 0;
+        for (int k = 2; k <= n; ++k) {
+            if (p[k] < 0x80 || p[k] > 0xBF) return 0;
+        }
+        p += n + 1;
+    }
+    return 1;
+}
+
+/* pythonfmu's fmi2SetString decodes each value strictly as UTF-8 and, on bytes that are not,
+   calls the slave with NULL: fmi2Fatal and a damaged instance. So a value that is not UTF-8
+   goes to the slave as NOT_UTF8 (components/fmi/base.py) and the hex of its bytes, which the
+   slave refuses naming the parameter. */
+#define NOT_UTF8 "\x1brobofmu:not-utf8:"
+
+EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
+{
+    ENTER(c);
+    if (nvr > 0 && (vr == NULL || value == NULL)) {
+        char text[512];
+        snprintf(text, sizeof text, "%.200s: fmi2SetString: no value reference or value array for %zu "
+                 "variables; nothing set", in->name, nvr);
+        filter(in, in->name, fmi2Error, STATUS_CATEGORY, text);
+        return finish(in, fmi2OK);
+    }
+    size_t invalid = 0;
+    for (size_t k = 0; k < nvr; ++k) invalid += value[k] != NULL && !utf8_valid((const unsigned char*)value[k]);
+    if (invalid == 0) return finish(in, stock.fmi2SetString(in->stock, vr, nvr, value));
+    fmi2String* forwarded = calloc(nvr, sizeof *forwarded);
+    int ok = forwarded != NULL;
+    for (size_t k = 0; ok && k < nvr; ++k) {
+        forwarded[k] = value[k];
+        if (value[k] == NULL || utf8_valid((const unsigned char*)value[k])) continue;
+        size_t n = strlen(value[k]);
+        char* hex = malloc(sizeof NOT_UTF8 + 2 * n);
+        if (hex == NULL) { ok = 0; break; }
+        memcpy(hex, NOT_UTF8, sizeof NOT_UTF8 - 1);
+        for (size_t j = 0; j < n; ++j)
+            snprintf(hex + sizeof NOT_UTF8 - 1 + 2 * j, 3, "%02x", (unsigned char)value[k][j]);
+        hex[sizeof NOT_UTF8 - 1 + 2 * n] = '\0';
+        forwarded[k] = hex;
+    }
+    fmi2Status s = fmi2OK;
+    if (ok) {
+        s = stock.fmi2SetString(in->stock, vr, nvr, forwarded);
+    } else {
+        char text[256];
+        snprintf(text, sizeof text, "%.200s: fmi2SetString: out of memory; nothing set", in->name);
+        filter(in, in->name, fmi2Error, STATUS_CATEGORY, text);
+    }
+    for (size_t k = 0; forwarded != NULL && k < nvr; ++k) {
+        if (forwarded[k] != value[k]) free((void*)forwarded[k]);
+    }
+    free(forwarded);
+    return finish(in, s);
+}
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {

@@ -291,9 +291,9 @@ def parser_for(argv: list[str]) -> argparse.ArgumentParser:
     p = sub.add_parser("ssp", help="export an experiment as an SSP 1.0 package (.ssp)",
                        description="Write the experiment's diagram, FMUs and parameter sets as an SSP "
                                    "1.0 package that libcosim, ecos and fmpy.ssp can run. Its system and "
-                                   "components are named by identifiers every tool takes (chess-pd: chess_pd; "
-                                   "a letter first: 3rrp-circle: x3rrp_circle); the experiment's name is the "
-                                   "SSD's description.")
+                                   "components are named by identifiers every tool takes (letters, digits and "
+                                   "underscores, a letter first: my-arm-pd gives my_arm_pd, 2-link-pd gives "
+                                   "x2_link_pd); the experiment's name is the SSD's description.")
     p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
     p.add_argument("--out", metavar="FILE", help="output file (default: EXPERIMENT.ssp)")
     p.add_argument("--fmus", default="fmus", metavar="DIR", help="FMU folder (default: fmus)")

@@ -28,7 +28,6 @@ import importlib
 import importlib.metadata as metadata
 import importlib.util
 import platform
-import re
 import subprocess
 import sys
 import sysconfig
@@ -37,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from .requirements import declared, needs, normalize
+from .requirements import REQUIREMENT_LINE, declared, needs, normalize
 
 __all__ = ["Requirement", "doctor", "fmu_problems", "libpython", "requirements", "runtime_problems"]
 
@@ -45,7 +44,6 @@ __all__ = ["Requirement", "doctor", "fmu_problems", "libpython", "requirements",
 #: ``robofmu build`` bundles robofmu.components): the importing process needs no copy.
 BUNDLED = {"pythonfmu", "robofmu"}
 
-_NAME = re.compile(r"^\s*([A-Za-z0-9][A-Za-z0-9._-]*)\s*(?:\[[^\]]*\])?\s*([^;]*?)\s*(?:;(.*))?$")
 
 
 @dataclass
@@ -72,11 +70,6 @@ class Requirement:
     specifier: str
     modules: list[str] = field(default_factory=list)
     for_fmus: bool = False
-
-
-def _declared() -> list[str]:
-    """robofmu's run-time requirements as declared (installed metadata, else pyproject.toml)."""
-    return declared()
 
 
 def _modules_of(distribution: str) -> list[str]:
@@ -115,8 +108,8 @@ def requirements() -> list[Requirement]:
     needed = needs(Path(components.__file__).resolve().parent)
     for_fmus = {normalize(n.distribution) for n in needed if n.distribution}
     found, listed = [], set()
-    for text in _declared():
-        match = _NAME.match(text)
+    for text in declared():
+        match = REQUIREMENT_LINE.match(text)
         name, specifier = match.group(1), match.group(2)
         listed.add(normalize(name))
         found.append(Requirement(text.split(";")[0].strip(), name, specifier, _modules_of(name),
@@ -125,7 +118,7 @@ def requirements() -> list[Requirement]:
         if n.distribution is None:
             found.append(Requirement(n.requirement, n.requirement, "", list(n.modules), True))
         elif normalize(n.distribution) not in listed and n.distribution.lower() not in BUNDLED:
-            found.append(Requirement(n.requirement, n.distribution, _NAME.match(n.requirement).group(2),
+            found.append(Requirement(n.requirement, n.distribution, REQUIREMENT_LINE.match(n.requirement).group(2),
                                      _modules_of(n.distribution), True))
     return found
 
@@ -192,7 +185,7 @@ def runtime_problems(fmus: list[Path]) -> tuple[list[str], list[str]]:
             continue
         with zipfile.ZipFile(path) as archive:
             wanted = archive.read("resources/requirements.txt").decode().splitlines()
-        distributions = tuple(sorted(_NAME.match(line).group(1) for line in wanted
+        distributions = tuple(sorted(REQUIREMENT_LINE.match(line).group(1) for line in wanted
                                      if line.strip() and not line.lstrip().startswith("#")))
         groups.setdefault((tuple(sorted(record.items())), distributions), []).append(path)
     for (items, distributions), paths in groups.items():

@@ -26,14 +26,14 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["BUNDLE", "Import", "Need", "UnmappedImport", "declared", "imports_of", "module_distributions",
+__all__ = ["BUNDLE", "REQUIREMENT_LINE", "Import", "Need", "UnmappedImport", "declared", "imports_of", "module_distributions",
            "needs", "normalize", "requirement_lines", "requirements_text"]
 
 #: The top-level package the FMUs bundle (its imports of itself are not requirements).
 BUNDLE = "robofmu"
 
 #: A requirement line: name, extras, specifier, marker.
-_LINE = re.compile(r"^\s*([A-Za-z0-9][A-Za-z0-9._-]*)\s*(?:\[[^\]]*\])?\s*([^;]*?)\s*(?:;(.*))?$")
+REQUIREMENT_LINE = re.compile(r"^\s*([A-Za-z0-9][A-Za-z0-9._-]*)\s*(?:\[[^\]]*\])?\s*([^;]*?)\s*(?:;(.*))?$")
 
 
 class UnmappedImport(ValueError):
@@ -130,7 +130,7 @@ def declared(project: str = "robofmu") -> list[str]:
     except metadata.PackageNotFoundError:
         pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
         lines = tomllib.loads(pyproject.read_text())["project"].get("dependencies", [])
-    return [r for r in lines if "extra" not in (_LINE.match(r).group(3) or "")]
+    return [r for r in lines if "extra" not in (REQUIREMENT_LINE.match(r).group(3) or "")]
 
 
 def needs(root: str | Path, bundle: str = BUNDLE) -> list[Need]:
@@ -147,7 +147,7 @@ def needs(root: str | Path, bundle: str = BUNDLE) -> list[Need]:
     for imp in imports_of(root):
         if imp.module != bundle and imp.module not in sys.stdlib_module_names:
             outside.setdefault(imp.module, []).append(imp)
-    specs = {normalize(_LINE.match(r).group(1)): r.split(";")[0].strip() for r in declared()}
+    specs = {normalize(REQUIREMENT_LINE.match(r).group(1)): r.split(";")[0].strip() for r in declared()}
     providers = module_distributions()
     by_distribution: dict[str, list[str]] = {}
     unmapped = []

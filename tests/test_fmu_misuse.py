@@ -17,7 +17,7 @@ from robofmu.components.fmi.base import NOT_UTF8
 from robofmu.components.robots import available, load_model
 from robofmu.system.fmu import Block, FMUError
 
-from fmu_util import DISCARD, ERROR, FATAL, OK, open_block, robot_blocks
+from fmu_util import ERROR, OK, open_block, robot_blocks
 
 ALL = robot_blocks()
 H = 1e-3

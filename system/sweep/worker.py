@@ -8,6 +8,7 @@ threads still runs one co-simulation at a time (start workers with ``--nthreads 
 """
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from pathlib import Path
@@ -75,8 +76,19 @@ def run_one(system, values: dict, stop_time: float | None, step: float | None,
     return record
 
 
+class _ShutdownHeartbeat(logging.Filter):
+    """Drops distributed's "Failed to communicate with scheduler during heartbeat." (logged with
+    its traceback): after a Ctrl-C the sweep closes the local cluster, and a worker whose
+    heartbeat was under way when the scheduler closed logs it, though its nanny is about to close
+    it (a race in distributed's shutdown, seen in about one sweep in five)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith("Failed to communicate with scheduler during heartbeat")
+
+
 def dask_setup(worker) -> None:
-    """Dask worker preload (``--preload robofmu.system.sweep.worker``): ignore SIGINT.
+    """Dask worker preload of the sweep's local cluster (``robofmu.system.sweep.worker``):
+    ignore SIGINT, and drop the heartbeat message of a cluster shutting down.
 
     Ctrl-C in a terminal reaches every process of the foreground group, the local workers too;
     the sweep's client handles it (keeps the finished rows, stops the cluster), so a worker
@@ -85,3 +97,4 @@ def dask_setup(worker) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker").addFilter(_ShutdownHeartbeat())

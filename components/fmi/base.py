@@ -153,7 +153,6 @@ class BlockSlave(Fmi2Slave):
         self._terminated = False
         self._held_warned = False
         self._bad_output: str | None = None     # why the outputs are held (the next step fails)
-        self.interrupted = False        # a KeyboardInterrupt abandoned an FMI call (_report_failure)
         for var in self.logic.variables:
             self._register(var)
         self.values = self.logic.values
@@ -309,9 +308,8 @@ class BlockSlave(Fmi2Slave):
 
     def _report_failure(self, exc: BaseException, call: str) -> None:
         """Log the exception that failed ``call`` (a _CallFailed is logged already); a
-        KeyboardInterrupt as an interruption (:data:`INTERRUPTION`), noted in :attr:`interrupted`."""
+        KeyboardInterrupt as an interruption (:data:`INTERRUPTION`), which the master recognizes."""
         if isinstance(exc, KeyboardInterrupt):
-            self.interrupted = True
             self._report(f"{call} {INTERRUPTION} at t = {self.time:.9g} s; the call is abandoned")
         elif not isinstance(exc, _CallFailed):
             self._report(f"{call} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}")

@@ -3,11 +3,11 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
-FMU_SOURCES := $(shell find components -name '*.py' -o -name '*.urdf' -o -name '*.toml') system/build.py \
-               $(wildcard system/fmi_export/*.py system/fmi_export/*.c system/fmi_export/*.h)
+FMU_SOURCES := $(shell find components -name '*.py' -o -name '*.urdf' -o -name '*.toml') system/packaging/build.py system/packaging/requirements.py \
+               $(wildcard system/packaging/fmi_export/*.py system/packaging/fmi_export/*.c system/packaging/fmi_export/*.h)
 FMU_STAMP := fmus/.built
 
-.PHONY: venv fmus test demo bench bench-peers soak clean
+.PHONY: venv fmus test check demo bench bench-peers soak clean
 
 venv: $(STAMP)
 
@@ -25,6 +25,12 @@ $(FMU_STAMP): $(STAMP) $(FMU_SOURCES)
 
 test: $(FMU_STAMP)
 	$(PY) -m pytest
+
+# the fast inner loop (a quarter of `make test`'s time or less): lint, then every test but those
+# marked slow (2 s or more) or interop (another FMI tool, process or host); `make test` runs all
+check: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(PY) -m pytest -q -m "not slow and not interop"
 
 demo: $(FMU_STAMP)
 	$(VENV)/bin/robofmu demo --out results

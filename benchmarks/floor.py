@@ -297,7 +297,7 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
     from loop_spec import spec as loop_spec
     from robofmu.system.experiment import load
-    from robofmu.system.replica import InProcessDiagram
+    from robofmu.system.studies.replica import InProcessDiagram
 
     spec = loop_spec(args.experiment, args.fmus)
     with tempfile.TemporaryDirectory() as tmp:

@@ -23,7 +23,7 @@ import robofmu.components  # noqa: F401  (the installed copy before any bundled 
 from robofmu.components.blocks import make_block
 from robofmu.components.ik import make_solver, solver_class, solvers
 from robofmu.components.robots import available, load_description, load_model
-from robofmu.system.fmu import Block
+from robofmu.system.fmu import FMUInstance
 
 H = 1e-3
 NEWTON = "newton_raphson"
@@ -94,7 +94,7 @@ def block_per_step(robot: str, path: Path, samples: np.ndarray, repeats: int) ->
             logic.output(k * H)
             logic.advance(k * H, H)
 
-    fmu = Block(path, "ik")
+    fmu = FMUInstance(path, "ik")
     try:
         fmu.initialize()
         vin = fmu.vrs("x_ref", "xd_ref", "xdd_ref")

@@ -2,23 +2,23 @@
 block logic in one Python loop without FMI, libcosim and ecos on the SSP export of the same
 diagram, and the diagram as one FMU container.
 
-    .venv/bin/python benchmarks/loop.py [--experiment chess-pd] [--fmus fmus] [--steps 0.001 0.005] [--stop 13]
+    .venv/bin/python benchmarks/loop.py [--experiment chess-pd] [--fmus fmus] [--step-sizes 0.001 0.005] [--stop-time 13]
 
 Runners (each in a fresh child process, one after the other):
 
 - ``robofmu``: ``Master(system).run(stop, h)`` (Gauss-Seidel), every output recorded;
-- ``in-process``: :meth:`robofmu.system.replica.InProcessDiagram.sampled`, the FMUs' own
+- ``in-process``: :meth:`robofmu.system.studies.replica.InProcessDiagram.sampled`, the FMUs' own
   FMI-free block logic called in the master's order, the same outputs recorded into a
   preallocated array: it reproduces the master exactly (the correctness lines print the difference);
-- ``libcosim``: :func:`robofmu.system.ssp.run_ssp_libcosim` on ``export_ssp(system)``
+- ``libcosim``: :func:`robofmu.system.interop.ssp.run_ssp_libcosim` on ``export_ssp(system)``
   (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
   observer, Booleans cannot be);
-- ``ecos``: :func:`robofmu.system.ssp.run_ssp_ecos` on the same SSP export (ecos's fixed-step
+- ``ecos``: :func:`robofmu.system.interop.ssp.run_ssp_ecos` on the same SSP export (ecos's fixed-step
   algorithm, the components stepped in parallel threads; Real outputs read through ecospy
   after every step);
-- ``container``: :func:`robofmu.system.container.export_container` of the same diagram (one FMU,
+- ``container``: :func:`robofmu.system.interop.container.export_container` of the same diagram (one FMU,
   fmu-manipulation-toolbox's C runtime stepping the block FMUs in the master's Gauss-Seidel
-  order), run by :func:`robofmu.system.container.run_container` (fmpy's ``FMU2Slave``: ``doStep``,
+  order), run by :func:`robofmu.system.interop.container.run_container` (fmpy's ``FMU2Slave``: ``doStep``,
   one ``getReal`` and one ``getBoolean`` of the recorded variables per step); it reproduces the
   master bit for bit;
 - ``C++ floor``: the same loop on Pinocchio's C++ API (``benchmarks/floor.py``: compiled here
@@ -45,6 +45,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from robofmu.system import options
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNNERS = ("robofmu", "in-process", "libcosim", "ecos", "container")
@@ -78,7 +80,7 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
     if runner == "libcosim":
         import libcosimpy.CosimExecution  # noqa: F401  (loaded before the "imports" mark, as for the others)
     elif runner == "ecos":
-        from robofmu.system.ssp import load_ecospy
+        from robofmu.system.interop.ssp import load_ecospy
 
         load_ecospy()
     imports_mb = _peak_mb()
@@ -86,19 +88,19 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
     if runner == "robofmu":
         result = Master(system).run(stop, h)
     elif runner == "in-process":
-        from robofmu.system.replica import InProcessDiagram
+        from robofmu.system.studies.replica import InProcessDiagram
 
         result = InProcessDiagram(system).sampled(h, stop)
     elif runner == "libcosim":
-        from robofmu.system.ssp import run_ssp_libcosim
+        from robofmu.system.interop.ssp import run_ssp_libcosim
 
         result = run_ssp_libcosim(ssp, stop, h)
     elif runner == "ecos":
-        from robofmu.system.ssp import run_ssp_ecos
+        from robofmu.system.interop.ssp import run_ssp_ecos
 
         result = run_ssp_ecos(ssp, stop, h)
     elif runner == "container":
-        from robofmu.system.container import export_container, run_container
+        from robofmu.system.interop.container import export_container, run_container
 
         system.step = h
         result = run_container(export_container(system, out.with_suffix(".fmu")), stop, h)
@@ -117,8 +119,8 @@ def _cell(value: float, width: int, spec: str) -> str:
 
 
 def run_child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, ssp: Path, out: Path) -> dict:
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--experiment", experiment, "--child", runner, "--h", repr(h),
-           "--stop", repr(stop), "--fmus", str(fmu_root), "--ssp", str(ssp), "--out", str(out)]
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--experiment", experiment, "--child", runner, "--step-size", repr(h),
+           "--stop-time", repr(stop), "--fmus", str(fmu_root), "--ssp", str(ssp), "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
     if proc.returncode != 0 or not lines:
@@ -146,24 +148,24 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--experiment", default="chess-pd", help="experiment to run (default chess-pd)")
     parser.add_argument("--fmus", default="fmus", help="FMU root folder (default fmus)")
-    parser.add_argument("--steps", type=float, nargs="+", default=[1e-3, 5e-3], help="communication steps (s)")
-    parser.add_argument("--stop", type=float, default=None, help="stop time (s; default: the experiment's)")
+    parser.add_argument("--step-sizes", type=float, nargs="+", default=[1e-3, 5e-3], help="communication steps (s)")
+    options.add_stop_time(parser)
     parser.add_argument("--repeat", type=int, default=3, help="fresh processes per runner; best time kept")
     parser.add_argument("--child", help=argparse.SUPPRESS)
-    parser.add_argument("--h", type=float, help=argparse.SUPPRESS)
+    parser.add_argument("--step-size", type=float, help=argparse.SUPPRESS)
     parser.add_argument("--ssp", help=argparse.SUPPRESS)
     parser.add_argument("--out", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     fmu_root = Path(args.fmus).resolve()
 
     if args.child:
-        info = child(args.experiment, args.child, args.h, args.stop, fmu_root, Path(args.ssp) if args.ssp else None, Path(args.out))
+        info = child(args.experiment, args.child, args.step_size, args.stop_time, fmu_root, Path(args.ssp) if args.ssp else None, Path(args.out))
         print("RESULT " + json.dumps(info), flush=True)
         return 0
 
     import robofmu.components  # noqa: F401
     from robofmu.system.experiment import load
-    from robofmu.system.ssp import export_ssp
+    from robofmu.system.interop.ssp import export_ssp
 
     system = load(args.experiment, fmu_dir=fmu_root)
     missing = [str(system.fmu_path(b)) for b in system.blocks if not system.fmu_path(b).is_file()]
@@ -171,7 +173,7 @@ def main(argv=None) -> int:
         print(f"missing FMUs {', '.join(missing)}: run `robofmu build --out {args.fmus}` first", file=sys.stderr)
         return 2
     experiment = args.experiment
-    stop = system.stop_time if args.stop is None else args.stop
+    stop = system.stop_time if args.stop_time is None else args.stop_time
     rows, checks = [], []
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     try:
@@ -185,7 +187,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="robofmu-bench-") as tmp:
         tmp = Path(tmp)
         ssp = export_ssp(system, tmp / f"{experiment}.ssp")
-        for h in args.steps:
+        for h in args.step_sizes:
             numbers = {**spec, "h": h, "n_steps": int(round(stop / h)), "stop": stop} if floor_note is None else None
             tries = {runner: [] for runner in RUNNERS}
             floor_tries = []
@@ -250,7 +252,7 @@ def main(argv=None) -> int:
     for line in checks:
         print(line)
     print()
-    for h in args.steps:
+    for h in args.step_sizes:
         per = {r: p for r, hh, _, p, *_ in rows if hh == h}
         walls = {r: w for r, hh, w, *_ in rows if hh == h}
         print(f"h = {h * 1e3:g} ms: robofmu no slower than libcosim: "

@@ -2,7 +2,7 @@
 the peers of ``make bench-peers``).
 
 Everything comes from the configured FMI-free blocks of the experiment (its FMUs' start values
-and the experiment's parameters, as :class:`robofmu.system.replica.InProcessDiagram` builds
+and the experiment's parameters, as :class:`robofmu.system.studies.replica.InProcessDiagram` builds
 them), so a change to the robot's description or the experiment reaches every peer. Only the
 loop the peers implement is supported: a ``waypoints`` trajectory, the ``pitch_elbow`` IK, the
 computed-torque controller and the RK4 plant.
@@ -38,7 +38,7 @@ def spec(experiment: str = "chess-pd", fmu_dir: str | Path = "fmus") -> dict:
     from robofmu.components.trajectory import SNAP_TOLERANCE, WaypointTrajectory
     from robofmu.system.check import step_count
     from robofmu.system.experiment import load
-    from robofmu.system.replica import InProcessDiagram
+    from robofmu.system.studies.replica import InProcessDiagram
 
     system = load(experiment, fmu_dir=fmu_dir)
     diagram = InProcessDiagram(system)

@@ -22,7 +22,7 @@ import numpy as np
 import robofmu.components  # noqa: F401  (the installed copy before any bundled one)
 from robofmu.components.blocks import make_block
 from robofmu.components.robots import available, load_description
-from robofmu.system.fmu import Block
+from robofmu.system.fmu import FMUInstance
 
 H = 1e-3
 
@@ -40,7 +40,7 @@ def best_of(fn, steps: int, repeats: int) -> float:
 
 def one_block(path: Path, robot: str, kind: str):
     """(FMI step, direct step) callables for one block, fed with its start values."""
-    fmu = Block(path, kind)
+    fmu = FMUInstance(path, kind)
     fmu.initialize()
     reals_in = [v for v in fmu.md.modelVariables if v.causality == "input" and v.type == "Real"]
     reals_out = [v for v in fmu.md.modelVariables if v.causality == "output" and v.type == "Real"]

@@ -2,7 +2,7 @@
 resident memory measured at ten points; it fails if memory grows after the first tenth.
 
     make soak            # or: .venv/bin/python benchmarks/soak.py [--experiment chess-pd] [--fmus fmus]
-                         #         [--steps 1000000] [--step 0.001] [--stop 13] [--limit 5]
+                         #         [--steps 1000000] [--step-size 0.001] [--stop-time 13] [--limit 5]
 
 The long-running user this stands for runs the experiment again and again in one process (a
 parameter study, an optimizer, a service): full runs of the experiment's own length (chess-pd:
@@ -15,7 +15,7 @@ records only ``plant.q`` (the master preallocates what it records: every output 
 the first run's, bit for bit.
 
 One run of 10^6 steps would instead grow by its own recording (points x signals x 8 bytes),
-which is not a leak; ``--stop`` lengthens the runs for a user with long runs (``--stop 1000``:
+which is not a leak; ``--stop-time`` lengthens the runs for a user with long runs (``--stop-time 1000``:
 one run, most of it at rest after the motion).
 
 Resident memory is ``VmRSS`` of /proc/self/status after the run that completes each tenth of
@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
+from robofmu.system import options
 from robofmu.system.check import step_count
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
@@ -55,8 +56,8 @@ def main(argv=None) -> int:
     parser.add_argument("--experiment", default="chess-pd")
     parser.add_argument("--fmus", default="fmus", help="FMU root folder (default fmus)")
     parser.add_argument("--steps", type=int, default=1_000_000, help="communication steps in all (default 10^6)")
-    parser.add_argument("--step", type=float, default=None, help="communication step (s; default the experiment's)")
-    parser.add_argument("--stop", type=float, default=None, help="length of each run (s; default the experiment's)")
+    options.add_step_size(parser)
+    options.add_stop_time(parser)
     parser.add_argument("--record", nargs="*", default=["plant.q"], help="what each run records (default plant.q)")
     parser.add_argument("--limit", type=float, default=5.0, help="allowed growth after the first tenth (MB)")
     args = parser.parse_args(argv)
@@ -64,8 +65,8 @@ def main(argv=None) -> int:
         parser.error("--steps must be at least 10")
 
     system = load(args.experiment, fmu_dir=args.fmus)
-    h = system.step if args.step is None else args.step
-    stop = system.stop_time if args.stop is None else args.stop
+    h = system.step if args.step_size is None else args.step_size
+    stop = system.stop_time if args.stop_time is None else args.stop_time
     per_run = step_count(0.0, stop, h)
     runs = math.ceil(args.steps / per_run)
     marks = [math.ceil(args.steps * k / 10) for k in range(1, 11)]       # steps completing each tenth

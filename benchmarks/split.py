@@ -29,11 +29,13 @@ import numpy as np
 
 import robofmu.components  # noqa: F401  (the installed copy before any bundled one)
 from robofmu.components.blocks import make_block
-from robofmu.components.fmi.base import _FAST_CHECK, BlockSlave
+from robofmu.components.fmi.base import BlockSlave
+from robofmu.components.fmi.contract import FAST_CHECK
 from robofmu.components.fmi.quiet import quietly
 from robofmu.system import experiment
-from robofmu.system.fmu import Block
-from robofmu.system.master import Master, _Fmi2Functions
+from robofmu.system.fmu import FMUInstance
+from robofmu.system.exchange import Fmi2Functions
+from robofmu.system.master import Master
 from run import H, best_of          # benchmarks/run.py, beside this file
 
 
@@ -97,14 +99,14 @@ def main(argv=None) -> int:
             if vin:                       # fmi2SetReal: the values written, the outputs stale
                 held[slots_in] = start_in
                 shared.dirty = 1
-            if slave._fast_refresh() & _FAST_CHECK:       # fmi2GetReal / fmi2GetBoolean
+            if slave._fast_refresh() & FAST_CHECK:       # fmi2GetReal / fmi2GetBoolean
                 shared.dirty = 0                          # the library found them finite
             slave._fast_step(clock[0] * H, H)     # fmi2DoStep
             clock[0] += 1
 
-        fmu = Block(node.path, name)
+        fmu = FMUInstance(node.path, name)
         fmu.initialize()
-        functions = _Fmi2Functions(fmu.slave)
+        functions = Fmi2Functions(fmu.slave)
         c_in = (ctypes.c_uint * max(1, len(vin)))(*vin)
         c_values = (ctypes.c_double * max(1, len(vin)))(*values)
         c_out = (ctypes.c_uint * max(1, len(vout)))(*vout)
@@ -117,7 +119,7 @@ def main(argv=None) -> int:
         t_arg, h_arg, true = ctypes.c_double(), ctypes.c_double(H), ctypes.c_int(1)
 
         def through_fmi(k, f=functions, c=functions.component, clock=fmi_clock):
-            # arguments of their C types, as the master passes them (_Fmi2Functions)
+            # arguments of their C types, as the master passes them (Fmi2Functions)
             if vin:
                 f.set_real(c, c_in, n_in, c_values)
             f.get_real(c, c_out, n_out, c_read)

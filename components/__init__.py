@@ -12,7 +12,11 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-__all__ = ["SOURCE_HASH", "source_hash", "check_bundle"]
+__all__ = ["SOURCE_HASH", "STEP_SIZE", "source_hash", "check_bundle"]
+
+#: The communication step (s) of every FMU's default experiment, and of an experiment that names
+#: none (``robofmu.system.defaults.STEP_SIZE`` is this): 1 ms.
+STEP_SIZE = 1e-3
 
 _PACKAGE_DIR = Path(__file__).resolve().parent
 _HASHED_SUFFIXES = (".py", ".urdf", ".toml")

@@ -2,13 +2,65 @@
 
 e = q_ref - q, z = integral of e dt. With a perfect model every joint's error obeys
 e_ddot + kd e_dot + kp e + ki z = 0 (z_dot = e).
+
+The gains' rule
+---------------
+The gains are validated here and nowhere else (:data:`GAINS`, :func:`check_gains`): the robot
+descriptions' gain sets, the controller block's parameters, :class:`ComputedTorque` and the step
+responses of ``robofmu step`` all apply it. The rule is
+
+    kp > 0,  kd > 0,  ki >= 0   (finite; kp in 1/s^2, kd in 1/s, ki in 1/s^3),
+
+the necessary conditions for the error dynamics to be asymptotically stable: the PD's
+s^2 + kd s + kp is Hurwitz exactly when kp > 0 and kd > 0 (kp = 0 leaves a joint with no
+restoring force, kd = 0 an undamped oscillator that never settles), and the PID's
+s^3 + kd s^2 + kp s + ki needs every coefficient positive (ki = 0 is the PD). No experiment uses
+kp = 0: the unactuated load cases have no controller block at all (the plant's tau unwired at 0),
+and ``gain_scale`` must be > 0, so the scaled gains keep the rule. The PID's remaining Hurwitz
+bound, ki < kp kd, couples the three gains (each a separate FMU parameter, and ``gain_scale``
+moves it) and is left to the design: every seed gain set satisfies it, and so do gains placed
+at stable poles (``robofmu step --settling-time --overshoot``).
 """
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .floats import FloatWriter
-from .robots.model import RobotModel
+from .parameters import Parameter, ParameterError
+
+if TYPE_CHECKING:
+    from .robots.model import RobotModel
+
+__all__ = ["GAINS", "check_gains", "ComputedTorque"]
+
+#: The gains as declared parameters, their bounds the rule (see the module notes): kp > 0,
+#: kd > 0, ki >= 0 (default 0: a PD). The controller block declares its ``kp``, ``kd``, ``ki``
+#: from these, the robot descriptions read their gain sets by them.
+GAINS = (
+    Parameter("kp", "Real", "1/s2", "Proportional gain (every joint)", above=0.0),
+    Parameter("kd", "Real", "1/s", "Derivative gain (every joint)", above=0.0),
+    Parameter("ki", "Real", "1/s3", "Integral gain (every joint); 0 for PD", default=0.0, low=0.0),
+)
+
+
+def check_gains(kp: float, kd: float, ki: float = 0.0) -> tuple[float, float, float]:
+    """The gains as floats, checked by the rule (:data:`GAINS`: kp > 0, kd > 0, ki >= 0, finite).
+
+    Raises
+    ------
+    ParameterError
+        Naming the first gain that breaks the rule: ``name`` is "kp", "kd" or "ki", ``problem``
+        the parameter's message (``parameter kd = 0 1/s is invalid: must be > 0``).
+    """
+    checked = []
+    for rule, value in zip(GAINS, (kp, kd, ki)):
+        try:
+            checked.append(rule.validate(value))
+        except ValueError as exc:
+            raise ParameterError(rule.name, str(exc)) from None
+    return checked[0], checked[1], checked[2]
 
 
 class ComputedTorque:
@@ -19,7 +71,8 @@ class ComputedTorque:
     robot : RobotModel
         The controller's model of the arm (its payload is what the controller believes).
     kp, kd, ki : float
-        Gains (1/s^2, 1/s, 1/s^3), >= 0, the same on every joint.
+        Gains (1/s^2, 1/s, 1/s^3), the same on every joint, by the rule of :func:`check_gains`
+        (ParameterError naming the gain otherwise).
 
     Notes
     -----
@@ -30,11 +83,8 @@ class ComputedTorque:
     """
 
     def __init__(self, robot: RobotModel, kp: float, kd: float, ki: float = 0.0):
-        for name, value in (("kp", kp), ("kd", kd), ("ki", ki)):
-            if not (np.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name}: gain must be finite and >= 0, got {value}")
         self.robot = robot
-        self.kp, self.kd, self.ki = float(kp), float(kd), float(ki)
+        self.kp, self.kd, self.ki = check_gains(kp, kd, ki)
         self.z = np.zeros(robot.n)
         self._command = np.zeros(robot.n)
         self._write_command, self._write_integral = FloatWriter(self._command), FloatWriter(self.z)

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .result import Result
-from .roles import Roles
-from .units import printed, small
+from robofmu.system.result import Result
+from robofmu.system.roles import Roles
+from robofmu.system.units import printed, small
 
 
 @dataclass
@@ -50,7 +50,7 @@ class Tracking:
     final_speed: np.ndarray | None
 
 
-def tracking(result: Result, roles: Roles) -> Tracking:
+def tracking_metrics(result: Result, roles: Roles) -> Tracking:
     """Metrics of a run recording the roles ``q`` and ``q_ref`` (``tau``, ``x_ref``, ``grip`` if any)."""
     roles.require("q", "q_ref")
     q, q_ref = roles.vector(result, "q"), roles.vector(result, "q_ref")

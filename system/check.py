@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
-from .diagram import BlockSpec, System, coerce, expand, spread
+from robofmu.system.diagram import BlockSpec, System, coerce, expand, spread
 
 
 def step_count(start_time: float, stop_time: float, step: float) -> int:

@@ -8,12 +8,29 @@ from __future__ import annotations
 
 import fnmatch
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from robofmu.system import defaults
+
 _INDEXED = re.compile(r"^(.*)\[(\d+(?:,\d+)*)\]$")       # q[2]; a matrix entry J[1,2]
+_PARAMETER = re.compile(r"^([A-Za-z_][\w-]*)\.([A-Za-z_][\w\[\],]*)$")    # controller.kp, plant.q0[2]
 _WIRE = re.compile(r"^\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*->\s*([A-Za-z_]\w*)\.([\w\[\]]+)\s*$")
+
+
+def parameter_address(name: str) -> tuple[str, str]:
+    """``BLOCK.PARAM`` (``controller.kp``, ``plant.q0[2]``) as ``(block, parameter)``: the one
+    grammar of a block parameter's address (experiment files, ``--set``, a sweep's ``--vary``).
+
+    Raises
+    ------
+    ValueError
+        ``'<name>' is not BLOCK.PARAM (e.g. controller.kp)``.
+    """
+    match = _PARAMETER.match(name.strip())
+    if match is None:
+        raise ValueError(f"{name!r} is not BLOCK.PARAM (e.g. controller.kp)")
+    return match.group(1), match.group(2)
 
 
 def expand(names, base: str) -> list[str]:
@@ -185,11 +202,11 @@ class System:
     blocks : list of BlockSpec
     wires : list of Wire or str
     fmu_dir : str or Path
-        Folder relative FMU paths are resolved against (default: ``fmus``).
+        Folder relative FMU paths are resolved against (default: :data:`defaults.FMU_FOLDER`).
     name, description : str
     stop_time, step : float
-        Default run length and communication step (s).
-    algorithm : {"gauss-seidel", "jacobi"}
+        Default run length and communication step (s; :mod:`~robofmu.system.defaults`).
+    algorithm : one of :data:`defaults.ALGORITHMS`
     extra : dict
         The experiment's other keys (``robot``, ``roles``).
     source : Path or None
@@ -198,12 +215,12 @@ class System:
 
     blocks: list[BlockSpec]
     wires: list[Wire]
-    fmu_dir: Path = Path("fmus")
+    fmu_dir: Path = Path(defaults.FMU_FOLDER)
     name: str = "system"
     description: str = ""
-    stop_time: float = 1.0
-    step: float = 1e-3
-    algorithm: str = "gauss-seidel"
+    stop_time: float = defaults.STOP_TIME
+    step: float = defaults.STEP_SIZE
+    algorithm: str = defaults.ALGORITHM
     extra: dict = field(default_factory=dict)
     source: Path | None = None
 
@@ -238,24 +255,10 @@ class System:
                 raise ValueError(f"blocks[{k}]: missing key {missing[0]!r}")
             blocks.append(BlockSpec(b["name"], b["fmu"], dict(b.get("parameters", {}))))
         return cls(blocks=blocks, wires=list(data.get("connections", [])),
-                   fmu_dir=Path(fmu_dir if fmu_dir is not None else data.get("fmu_dir", "fmus")),
+                   fmu_dir=Path(fmu_dir if fmu_dir is not None else data.get("fmu_dir", defaults.FMU_FOLDER)),
                    name=data.get("name", "system"), description=data.get("description", ""),
-                   stop_time=float(data.get("stop_time", 1.0)), step=float(data.get("step", 1e-3)),
-                   algorithm=data.get("algorithm", "gauss-seidel"),
+                   stop_time=float(data.get("stop_time", defaults.STOP_TIME)),
+                   step=float(data.get("step", defaults.STEP_SIZE)),
+                   algorithm=data.get("algorithm", defaults.ALGORITHM),
                    extra={k: v for k, v in data.items() if k not in known})
-
-    @classmethod
-    def from_file(cls, path: str | Path, fmu_dir: str | Path | None = None) -> "System":
-        """Read a TOML experiment file."""
-        path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"{path}: invalid TOML: {exc}") from None
-        try:
-            system = cls.from_dict(data, fmu_dir)
-        except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from None
-        system.source = path
-        return system
 

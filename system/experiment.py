@@ -27,7 +27,8 @@ from pathlib import Path
 
 from robofmu.components.robots import load_description
 
-from .diagram import System, Wire
+from robofmu.system import defaults
+from robofmu.system.diagram import System, Wire, parameter_address
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 
@@ -44,7 +45,7 @@ KEYS = {"name": "a string (the experiment's name)",
         "robot": "a string (a described robot)",
         "stop_time": "a time in s > 0",
         "step": "a communication step in s > 0",
-        "algorithm": "'gauss-seidel' or 'jacobi'",
+        "algorithm": " or ".join(repr(a) for a in defaults.ALGORITHMS),
         "blocks": "an array of [[blocks]] tables (name, fmu, parameters)",
         "connections": "an array of strings 'block.variable -> block.variable'",
         "roles": "a table of role = 'block.variable'",
@@ -161,7 +162,7 @@ def _check_file(path: Path, data: dict) -> None:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
                     or value <= 0:
                 raise _wrong(path, key, KEYS[key], value)
-    if "algorithm" in data and data["algorithm"] not in ("gauss-seidel", "jacobi"):
+    if "algorithm" in data and data["algorithm"] not in defaults.ALGORITHMS:
         raise _wrong(path, "algorithm", KEYS["algorithm"], data["algorithm"])
     if "abstract" in data and not isinstance(data["abstract"], bool):
         raise _wrong(path, "abstract", KEYS["abstract"], data["abstract"])
@@ -345,9 +346,10 @@ def with_parameters(system: System, values: dict) -> System:
     configured = copy.deepcopy(system)
     names = [b.name for b in configured.blocks]
     for name, value in values.items():
-        block, dot, parameter = name.partition(".")
-        if not dot or not parameter:
-            raise ValueError(f"{name}: expected BLOCK.PARAM (e.g. controller.kp)")
+        try:
+            block, parameter = parameter_address(name)
+        except ValueError:
+            raise ValueError(f"{name}: expected BLOCK.PARAM (e.g. controller.kp)") from None
         if block not in names:
             raise ValueError(f"{name}: no block {block!r} in {system.name} (blocks: {', '.join(names)})")
         configured.block(block).parameters[parameter] = value

@@ -1,17 +1,19 @@
 """One FMU instance, as the master sees it: fmpy's FMU2Slave plus names, batching and a log.
 
-Everything FMI goes through fmpy. A :class:`Block` resolves variable names (``q[2]``) and
+Everything FMI goes through fmpy. An :class:`FMUInstance` resolves variable names (``q[2]``) and
 vector bases (``q`` -> ``q[1]``..``q[n]``) to value references once, keeps every message the FMU
-logs (:attr:`Block.messages`), and raises :class:`FMUError` naming the instance, the call and the
+logs (:attr:`FMUInstance.messages`), and raises :class:`FMUError` naming the instance, the call and the
 FMU's last error messages when a call fails.
 """
 from __future__ import annotations
 
 import ctypes
 import shutil
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
+from xml.etree import ElementTree
 
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
@@ -20,9 +22,18 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy import calloc, free
 
-from .diagram import coerce, expand, spread
+from robofmu.components.fmi.model_description import VENDOR_TOOL
+from robofmu.system.diagram import coerce, expand, spread
 
 STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
+
+#: The statuses of the messages that tell why a call failed (:meth:`FMUInstance.errors`).
+FAILURES = ("ERROR", "FATAL", "DISCARD")
+
+
+def status_name(status: int) -> str:
+    """The name of an fmi2Status (``"ERROR"``), or the number as text if it names none."""
+    return STATUS[status] if 0 <= status < len(STATUS) else str(status)
 
 
 @dataclass(frozen=True)
@@ -39,9 +50,8 @@ class LogMessage:
 class FMUError(RuntimeError):
     """A FMU call failed; the message names the instance, the call and what the FMU logged."""
 
-    def __init__(self, block: "Block", call: str, detail: str = "", since: int = 0):
-        logged = [m.message for m in block.messages[since:]
-                  if m.status in ("ERROR", "FATAL", "DISCARD")]
+    def __init__(self, block: "FMUInstance", call: str, detail: str = "", since: int = 0):
+        logged = block.errors(since)
         text = f"{block.name}: {call} failed"
         if detail:
             text += f" ({detail})"
@@ -54,12 +64,12 @@ class FMUError(RuntimeError):
 
 
 # fmpy's native logger proxy (it formats the variadic message) remembers one Python logger for
-# the whole process, whichever instance registered last. So every Block registers the same
+# the whole process, whichever instance registered last. So every FMUInstance registers the same
 # logger, and each instance's callbacks carry its own componentEnvironment, which the FMU hands
-# back with every message: the route to the Block the message belongs to. A message of no
-# Block's (fmpy's own default callbacks, e.g. ``simulate_fmu`` without a logger, lead here too
-# once a Block exists) is printed as fmpy's default logger would.
-_ROUTES: dict[int, "Block"] = {}
+# back with every message: the route to the FMUInstance the message belongs to. A message of no
+# FMUInstance's (fmpy's own default callbacks, e.g. ``simulate_fmu`` without a logger, lead here too
+# once a FMUInstance exists) is printed as fmpy's default logger would.
+_ROUTES: dict[int, "FMUInstance"] = {}
 _NEXT_ROUTE = [1]
 
 
@@ -74,7 +84,7 @@ def _route_message(env, instance, status, category, message):
 _LOGGER = fmi2CallbackLoggerTYPE(_route_message)
 
 
-def _callbacks_for(block: "Block") -> fmi2CallbackFunctions:
+def _callbacks_for(block: "FMUInstance") -> fmi2CallbackFunctions:
     key = _NEXT_ROUTE[0]
     _NEXT_ROUTE[0] += 1
     _ROUTES[key] = block
@@ -92,7 +102,7 @@ def _callbacks_for(block: "Block") -> fmi2CallbackFunctions:
     return callbacks
 
 
-class Block:
+class FMUInstance:
     """An instantiated co-simulation FMU.
 
     Parameters
@@ -138,12 +148,17 @@ class Block:
 
     def _log(self, env, instance, status, category, message):
         msg = LogMessage(instance.decode(errors="replace") if instance else self.name,
-                         STATUS[status] if 0 <= status < len(STATUS) else str(status),
+                         status_name(status),
                          category.decode(errors="replace") if category else "",
                          message.decode(errors="replace") if message else "")
         self.messages.append(msg)
         if self._echo is not None:
             self._echo(msg)
+
+    def errors(self, since: int = 0) -> list[str]:
+        """The texts of the messages logged with a failure's status (:data:`FAILURES`), from
+        message ``since`` on."""
+        return [m.message for m in self.messages[since:] if m.status in FAILURES]
 
     # -- names -------------------------------------------------------------------------------------
     def variable(self, name: str):
@@ -255,3 +270,19 @@ class Block:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def block_identity(path: str | Path) -> dict[str, str]:
+    """Robot, kind, variant and source hash a robofmu FMU declares in its vendor annotation.
+
+    Raises
+    ------
+    ValueError
+        If the FMU carries no robofmu annotation (not a robofmu block).
+    """
+    with zipfile.ZipFile(path) as archive:
+        root = ElementTree.fromstring(archive.read("modelDescription.xml"))
+    node = root.find(f"VendorAnnotations/Tool[@name='{VENDOR_TOOL}']/Block")
+    if node is None:
+        raise ValueError(f"{path}: not a robofmu block (no {VENDOR_TOOL} vendor annotation)")
+    return dict(node.attrib)

@@ -28,7 +28,7 @@ def sigint_flag(raise_interrupt: bool = False):
         yield flag
         return
 
-    def note(signum, frame):
+    def note(_signum, _frame):
         flag[0] = True
         if raise_interrupt:
             raise KeyboardInterrupt

@@ -13,10 +13,10 @@ each block, so the plant integrates [t, t + h] with the torque computed at t. Th
 reads all outputs first and then sets all inputs, so each feedthrough block lags one step (for
 comparison).
 
-Values move between FMUs through preallocated buffers: one batched fmi2GetReal per block into a
-signal vector, one batched fmi2SetReal per block from it; no buffer is allocated per step. The
-FMI functions are taken from the FMU's shared library as fmpy loaded it (``FMU2Slave.dll``) and
-called without fmpy's per-call Python wrapper; the master checks each returned status itself.
+Values move between FMUs through preallocated signal vectors: one batched fmi2GetReal per block
+into them, one batched fmi2SetReal per block from them, nothing allocated per step. Those calls
+and doStep go through the master's FMI gateway, :mod:`robofmu.system.exchange` (fmpy does the
+rest of each FMU's life: :class:`~robofmu.system.fmu.FMUInstance`).
 
 Ctrl-C (SIGINT) during :meth:`Master.run` stops the run at the next communication point: a
 handler installed for the run only notes the signal (a KeyboardInterrupt raised inside an FMU's
@@ -32,32 +32,26 @@ the call with fmi2Error and a message holding :data:`INTERRUPTION`, which the ma
 """
 from __future__ import annotations
 
-import ctypes
 import math
 import os
 import time as _time
 from pathlib import Path
 from typing import Callable
 
-import fmpy
 import numpy as np
-from fmpy.fmi2 import fmi2Boolean, fmi2Component, fmi2Real, fmi2Status, fmi2True, fmi2ValueReference
 
-from .check import DiagramError, Link, Node, Plan, plan, step_count, variable_unit
-from .diagram import System, select, unmatched
-from .fmu import STATUS, Block, FMUError, LogMessage
-from .interrupt import sigint_flag
-from .result import Result
+from robofmu.system.check import DiagramError, Link, Node, Plan, plan, step_count, variable_unit
+from robofmu.components.fmi.reporting import INTERRUPTION
+from robofmu.system.defaults import ALGORITHMS
+from robofmu.system.diagram import System, select, unmatched
+from robofmu.system.exchange import (Failure, Fmi2Functions, Inputs, Ports, getters, output_port, setters,
+                                     stepper)
+from robofmu.system.fmu import FMUInstance, FMUError, LogMessage
+from robofmu.system.interrupt import sigint_flag
+from robofmu.system.result import Result
 
-__all__ = ["ALGORITHMS", "DiagramError", "Interrupted", "Master", "Result", "SimulationError", "available_memory",
-           "step_count"]
+__all__ = ["DiagramError", "Interrupted", "Master", "Result", "SimulationError", "available_memory", "step_count"]
 
-ALGORITHMS = ("gauss-seidel", "jacobi")
-
-#: What a robofmu block logs when a KeyboardInterrupt in its Python code abandons an FMI call
-#: (``robofmu.components.fmi.base.INTERRUPTION``, the same text: the FMUs may run another copy
-#: of the components than this process imports, so it is matched as text).
-INTERRUPTION = "interrupted: KeyboardInterrupt (Ctrl-C) in the block's Python code"
 
 
 class SimulationError(RuntimeError):
@@ -153,7 +147,7 @@ class Master:
     plan : Plan or None
         The checked diagram (None until :meth:`check`); :attr:`nodes`, :attr:`links`,
         :attr:`order` and :attr:`warnings` read it.
-    blocks : dict of str to Block
+    blocks : dict of str to FMUInstance
         The instantiated blocks during a run.
     """
 
@@ -165,7 +159,7 @@ class Master:
         self.progress = progress
         self.log = log
         self.plan: Plan | None = None
-        self.blocks: dict[str, Block] = {}
+        self.blocks: dict[str, FMUInstance] = {}
 
     # -- the plan ----------------------------------------------------------------------------------
     def check(self) -> list[str]:
@@ -241,8 +235,8 @@ class Master:
         ----------
         stop_time, step : float, optional
             Run end and communication step (s); default the system's.
-        algorithm : {"gauss-seidel", "jacobi"}, optional
-            Default the system's.
+        algorithm : str, optional
+            One of :data:`robofmu.system.defaults.ALGORITHMS`; default the system's.
         start_time : float
             (s).
         csv_path : str or Path, optional
@@ -306,7 +300,7 @@ class Master:
         for name in self.order:
             node = self.nodes[name]
             try:
-                block = Block(node.path, name, echo=self.log, model_description=node.model_description)
+                block = FMUInstance(node.path, name, echo=self.log, model_description=node.model_description)
             except FMUError as exc:
                 raise SimulationError(str(exc), name, None, None) from None
             self.blocks[name] = block
@@ -343,19 +337,19 @@ class Master:
             # each block's outputs are contiguous in the signal vectors (outputs in evaluation order)
             real_rows = [k for k, (block, _) in enumerate(real_outputs) if block == name]
             boolean_rows = [k for k, (block, _) in enumerate(boolean_outputs) if block == name]
-            get_real = _Port([real_outputs[k][1].valueReference for k in real_rows],
-                             _rows(self.real_signals, real_rows), ctypes.c_double)
-            get_boolean = _Port([boolean_outputs[k][1].valueReference for k in boolean_rows],
-                                _rows(self.boolean_signals, boolean_rows), ctypes.c_int)
+            get_real = output_port([real_outputs[k][1].valueReference for k in real_rows],
+                                   self.real_signals, real_rows)
+            get_boolean = output_port([boolean_outputs[k][1].valueReference for k in boolean_rows],
+                                      self.boolean_signals, boolean_rows)
             # Inputs from blocks evaluated earlier are set before this block's outputs are read;
             # inputs from blocks evaluated later cannot affect those outputs (the order is
             # topological in the feedthrough graph) and are set after the pass, before doStep.
             links = [link for link in self.links if link.target == name]
-            early = _Inputs([link for link in links if rank[link.source] < rank[name]], variables,
-                            real_index, boolean_index, self.real_signals)
-            late = _Inputs([link for link in links if rank[link.source] >= rank[name]], variables,
+            early = Inputs([link for link in links if rank[link.source] < rank[name]], variables,
                            real_index, boolean_index, self.real_signals)
-            self.ports[name] = (get_real, get_boolean, early, late)
+            late = Inputs([link for link in links if rank[link.source] >= rank[name]], variables,
+                          real_index, boolean_index, self.real_signals)
+            self.ports[name] = Ports(get_real, get_boolean, early, late)
         self.real_names = [f"{block}.{v.name}" for block, v in real_outputs]
         self.boolean_names = [f"{block}.{v.name}" for block, v in boolean_outputs]
         units = {f"{block}.{v.name}": variable_unit(v) for block, v in real_outputs + boolean_outputs}
@@ -383,17 +377,11 @@ class Master:
         real_signals, boolean_signals = self.real_signals, self.boolean_signals
         early, reads, late, steps = [], [], [], []
         for name in self.order:
-            functions = _Fmi2Functions(self.blocks[name].slave)
-            get_real, get_boolean, inputs_early, inputs_late = self.ports[name]
-            block_reads = []
-            for port, function, call in ((get_real, functions.get_real, "fmi2GetReal"),
-                                         (get_boolean, functions.get_boolean, "fmi2GetBoolean")):
-                if port.count:
-                    block_reads.append(_get(function, functions.component, port, name, call))
-            reads.append(block_reads)
-            early.append(_sets(functions, inputs_early, real_signals, boolean_signals, name))
-            late.append(_sets(functions, inputs_late, real_signals, boolean_signals, name))
-            steps.append(_step(functions, name))
+            functions, ports = Fmi2Functions(self.blocks[name].slave), self.ports[name]
+            reads.append(getters(functions, ports, name))
+            early.append(setters(functions, ports.early, real_signals, boolean_signals, name))
+            late.append(setters(functions, ports.late, real_signals, boolean_signals, name))
+            steps.append(stepper(functions, name))
         gauss_seidel = ([op for sets, gets in zip(early, reads) for op in sets + gets]
                         + [op for sets in late for op in sets])
         if algorithm == "gauss-seidel":
@@ -424,7 +412,7 @@ class Master:
                 if not math.isfinite(real_signals.dot(ones)) and not np.isfinite(real_signals).all():
                     index = int(np.flatnonzero(~np.isfinite(real_signals))[0])
                     bad = self.real_names[index]
-                    raise _Failure(bad.split(".")[0], f"output {bad} is not finite "
+                    raise Failure(bad.split(".")[0], f"output {bad} is not finite "
                                    f"({real_signals[index]}) at t = {t:.9g} s")
                 if record_all:
                     recorded[k, :n_real] = real_signals
@@ -435,7 +423,7 @@ class Master:
                     recorded[k] = row[self.keep]
                 n_recorded = k + 1
                 if interrupted[0]:                 # SIGINT: stop at this recorded point
-                    raise _Failure("", "interrupted", "SIGINT")
+                    raise Failure("", "interrupted", "SIGINT")
                 if k == n_steps:
                     break
                 for op in steps:
@@ -445,13 +433,12 @@ class Master:
         except KeyboardInterrupt:       # a callback's, or a signal no handler could note
             kept = (times, recorded, n_recorded, algorithm, h, csv_path)
             raise self._interruption(" (KeyboardInterrupt)", None, *kept) from None
-        except _Failure as exc:
+        except Failure as exc:
             kept = (times, recorded, n_recorded, algorithm, h, csv_path)
             if exc.call == "SIGINT":
                 raise self._interruption("", None, *kept) from None
             if exc.call:
-                logged = [m.message for m in self.blocks[exc.block].messages
-                          if m.status in ("ERROR", "FATAL", "DISCARD")]
+                logged = self.blocks[exc.block].errors()
                 if logged and INTERRUPTION in logged[-1]:      # the block's code was interrupted
                     raise self._interruption(f" (KeyboardInterrupt in {exc.block}'s {exc.call})", exc.block,
                                              *kept) from None
@@ -521,179 +508,3 @@ def _checked_steps(start_time: float, stop_time: float, h: float, given: dict, n
     except ValueError as exc:
         raise ValueError(f"Master.run: {exc}") from None
 
-
-# -- the exchange ----------------------------------------------------------------------------------
-def _rows(signals: np.ndarray, rows: list[int]) -> np.ndarray:
-    """The contiguous slice ``signals[rows[0] : rows[-1] + 1]`` (a view), or an empty array."""
-    return signals[rows[0]:rows[-1] + 1] if rows else np.zeros(0, dtype=signals.dtype)
-
-
-class _Port:
-    """Preallocated ctypes views for one batched get or set of one type on one block.
-
-    Parameters
-    ----------
-    references : list of int
-        Value references, length n.
-    buffer : ndarray, shape (n,)
-        float64 for Real, int32 for Boolean; the FMI call reads or writes it in place.
-    ctype : ctypes type
-        ``c_double`` or ``c_int``, matching ``buffer``.
-    """
-
-    def __init__(self, references: list[int], buffer: np.ndarray, ctype):
-        self.count = len(references)
-        self.size = ctypes.c_size_t(self.count)         # the call's nvr, converted once
-        self.references = (fmi2ValueReference * max(self.count, 1))(*references)
-        self.buffer = buffer
-        self.values = (ctype * self.count).from_buffer(buffer) if self.count else None
-
-
-class _Inputs:
-    """The wired inputs of one block fed in one phase: ports, and where in the signal vectors
-    their values come from. Real inputs whose sources are consecutive signals (a wired vector)
-    are set straight from the signal vector (``real_in_place``: the port's buffer is a view of
-    it), others through a buffer they are gathered into."""
-
-    def __init__(self, links: list[Link], variables: dict, real_index: dict, boolean_index: dict,
-                 real_signals: np.ndarray):
-        real_links = [link for link in links if variables[link.input].type == "Real"]
-        boolean_links = [link for link in links if variables[link.input].type == "Boolean"]
-        self.real_sources = np.array([real_index[(link.source, link.output)] for link in real_links],
-                                     dtype=np.intp)
-        sources = self.real_sources
-        self.real_in_place = bool(sources.size) and bool(np.all(sources == sources[0] + np.arange(sources.size)))
-        buffer = (real_signals[sources[0]:sources[0] + sources.size] if self.real_in_place
-                  else np.zeros(len(real_links)))
-        self.real = _Port([variables[link.input].valueReference for link in real_links], buffer, ctypes.c_double)
-        self.boolean = _Port([variables[link.input].valueReference for link in boolean_links],
-                             np.zeros(len(boolean_links), dtype=np.int32), ctypes.c_int)
-        self.boolean_sources = np.array([boolean_index[(link.source, link.output)] for link in boolean_links],
-                                        dtype=np.intp)
-        self.last_booleans = b""          # bytes of the Boolean values last set (none yet)
-
-
-# The calls' C types (FMI 2.0 fmi2FunctionTypes.h), which every argument is made as once:
-#   fmi2GetReal / fmi2SetReal (fmi2Component, const fmi2ValueReference*, size_t, fmi2Real*)
-#   fmi2GetBoolean / fmi2SetBoolean (fmi2Component, const fmi2ValueReference*, size_t, fmi2Boolean*)
-#   fmi2DoStep (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean)
-
-
-class _Fmi2Functions:
-    """The FMI 2.0 functions of the hot loop for one instance, bound once.
-
-    Called with arguments already of their C types (listed above, made once per port: the
-    component as ``c_void_p``, counts as ``c_size_t``, arrays, ``c_double`` times whose value
-    is set per step): ctypes then converts nothing per call (without ``argtypes`` it would
-    pass a Python int as a C int, so nothing else may be passed), half the cost of a call.
-
-    Taken from the FMU's shared library as fmpy loaded it: the ``dll`` (a ``ctypes.CDLL``) and
-    ``component`` attributes of fmpy's ``FMU2Slave`` (public attributes, not fmpy's private
-    table of wrapped functions). ``dll[name]`` makes a new ctypes function object, so the
-    prototypes set here (from the FMI 2.0 header) leave fmpy's own untouched. They are bound
-    as Python-API functions (``ctypes.PyDLL`` on the same handle): the calling thread keeps the
-    GIL through each call. A pythonfmu FMU takes the GIL again inside every call anyway; released
-    and retaken thousands of times a second, it would go to any other thread of the process that
-    waits for it (a Dask worker's event loop), and each step would queue behind that thread.
-
-    Raises
-    ------
-    RuntimeError
-        If the installed fmpy does not provide those attributes (a clear message, at the first
-        run, instead of an AttributeError in the loop).
-    """
-
-    def __init__(self, slave):
-        library = getattr(slave, "dll", None)
-        component = getattr(slave, "component", None)
-        if not isinstance(library, ctypes.CDLL) or component is None:
-            raise RuntimeError(
-                f"fmpy {getattr(fmpy, '__version__', '?')}: FMU2Slave has no loaded shared library "
-                "`dll` (ctypes.CDLL) and instance `component`; the master binds fmi2GetReal, "
-                "fmi2SetReal, fmi2GetBoolean, fmi2SetBoolean and fmi2DoStep from them (written "
-                "for fmpy 0.3.x)")
-        self.component = fmi2Component(component)
-        library = ctypes.PyDLL(library._name, handle=library._handle)
-        self.get_real = _bind(library, "fmi2GetReal")
-        self.set_real = _bind(library, "fmi2SetReal")
-        self.get_boolean = _bind(library, "fmi2GetBoolean")
-        self.set_boolean = _bind(library, "fmi2SetBoolean")
-        self.do_step = _bind(library, "fmi2DoStep")
-
-
-def _bind(library: ctypes.CDLL, name: str):
-    function = library[name]            # no argtypes: see _Fmi2Functions (the C types: above it)
-    function.restype = fmi2Status
-    return function
-
-
-class _Failure(Exception):
-    """A block failed: an FMI call returned an error status (``call`` set), or an output is bad."""
-
-    def __init__(self, block: str, message: str, call: str | None = None):
-        super().__init__(message)
-        self.block = block
-        self.message = message
-        self.call = call
-
-
-def _status(status: int) -> str:
-    return STATUS[status].lower() if 0 <= status < len(STATUS) else str(status)
-
-
-def _get(function, component, port: _Port, name: str, call: str):
-    """A closure reading one block's outputs of one type into the signal vector."""
-    def op(function=function, component=component, references=port.references, count=port.size,
-           values=port.values):
-        status = function(component, references, count, values)
-        if status > 1:
-            raise _Failure(name, _status(status), call)
-    return op
-
-
-def _sets(functions: _Fmi2Functions, inputs: _Inputs, real_signals: np.ndarray,
-          boolean_signals: np.ndarray, name: str) -> list:
-    """Closures setting one block's inputs (of one phase) from the signal vectors."""
-    ops = []
-    real, boolean = inputs.real, inputs.boolean
-    if real.count and inputs.real_in_place:
-        def set_real(function=functions.set_real, component=functions.component,
-                     references=real.references, count=real.size, values=real.values):
-            status = function(component, references, count, values)
-            if status > 1:
-                raise _Failure(name, _status(status), "fmi2SetReal")
-        ops.append(set_real)
-    elif real.count:
-        def set_real(take=real_signals.take, sources=inputs.real_sources, buffer=real.buffer,
-                     function=functions.set_real, component=functions.component,
-                     references=real.references, count=real.size, values=real.values):
-            take(sources, out=buffer)
-            status = function(component, references, count, values)
-            if status > 1:
-                raise _Failure(name, _status(status), "fmi2SetReal")
-        ops.append(set_real)
-    if boolean.count:
-        def set_boolean(take=boolean_signals.take, sources=inputs.boolean_sources, buffer=boolean.buffer,
-                        function=functions.set_boolean, component=functions.component,
-                        references=boolean.references, count=boolean.size, values=boolean.values):
-            take(sources, out=buffer)
-            now = buffer.tobytes()
-            if now != inputs.last_booleans:       # discrete inputs: set only when they change
-                status = function(component, references, count, values)
-                if status > 1:
-                    raise _Failure(name, _status(status), "fmi2SetBoolean")
-                inputs.last_booleans = now
-        ops.append(set_boolean)
-    return ops
-
-
-def _step(functions: _Fmi2Functions, name: str):
-    """A closure calling one block's fmi2DoStep(t, h)."""
-    def op(t, h, function=functions.do_step, component=functions.component, time=fmi2Real(),
-           step=fmi2Real(), no_set_state_before=fmi2Boolean(fmi2True)):
-        time.value = t
-        step.value = h
-        status = function(component, time, step, no_set_state_before)
-        if status > 1:
-            raise _Failure(name, _status(status), "fmi2DoStep")
-    return op

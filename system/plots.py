@@ -12,10 +12,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import FancyArrowPatch, FancyBboxPatch  # noqa: E402
 
-from .diagram import System  # noqa: E402
-from .result import Result  # noqa: E402
-from .roles import Roles  # noqa: E402
-from .units import printed, small  # noqa: E402
+from robofmu.system.diagram import System  # noqa: E402
+from robofmu.system.result import Result  # noqa: E402
+from robofmu.system.roles import Roles  # noqa: E402
+from robofmu.system.units import printed, small  # noqa: E402
 
 COLORS = ["tab:red", "tab:green", "tab:blue", "k", "tab:orange", "tab:purple"]
 #: The iterative IK solvers' diagnostics a run may record as outputs ``<instance>.<name>``.
@@ -39,11 +39,6 @@ def _grip_spans(ax, result: Result, roles: Roles):
         if g.any():
             t = result.time[g]
             ax.axvspan(t[0], t[-1], color="0.9", zorder=0, label="payload carried")
-
-
-def _unit(result: Result, base: str, fallback: str = "") -> str:
-    """The printed unit of a recorded vector's first element (its elements share it)."""
-    return printed(result.units.get(f"{base}[1]", fallback))
 
 
 def _profile(result: Result, path: Path, bases: list[str], labels: list[str], title: str) -> Path:
@@ -377,9 +372,9 @@ def block_diagram(system: System, path: Path, order: list[str] | None = None) ->
     return _save(fig, path)
 
 
-def cross_check(checks: dict, path: Path, title: str) -> Path:
+def constraint_residual(checks: dict, path: Path, title: str) -> Path:
     """A second, independent formulation of the dynamics along each run (``checks``: run ->
-    :class:`~robofmu.system.crosscheck.CrossCheck`): its constraint residual |Phi(t)| (top) and
+    :class:`~robofmu.system.studies.crosscheck.CrossCheck`): its constraint residual |Phi(t)| (top) and
     the largest difference of its joint coordinates from the co-simulated plant's (bottom), both
     on log scales; points where a value is exactly 0 are left out."""
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 6.4), sharex=True)

@@ -12,8 +12,10 @@ import numpy as np
 
 from robofmu.components.robots import RobotModel, load_model
 
-from .diagram import System
-from .result import Result
+from robofmu.system import experiment
+from robofmu.system.diagram import System, expand
+from robofmu.system.result import Result
+from robofmu.system.usage import UsageError
 
 
 @dataclass(frozen=True)
@@ -109,3 +111,43 @@ def task_axes(model: RobotModel) -> tuple[list[int], list[int]]:
     orientation), from its task units."""
     units = model.task_units(0)
     return ([i for i, u in enumerate(units) if u == "m"], [i for i, u in enumerate(units) if u == "rad"])
+
+
+#: The roles the analysis of a run reads (``tau`` too where the diagram has efforts: an
+#: unactuated run, whose plant's efforts are unwired at their start values, declares none).
+NEEDED_ROLES = ("q", "q_ref")
+
+
+def check_roles(system: System, master, needed: tuple[str, ...] = NEEDED_ROLES) -> Roles:
+    """The roles of ``system``, checked against the outputs of ``master``'s planned blocks.
+
+    Raises
+    ------
+    UsageError
+        Naming the file and key: no robot, a role in ``needed`` missing, a role naming no block
+        or no output of its block.
+    """
+    source = system.source or system.name
+    if not system.extra.get("robot"):
+        raise UsageError(f"{source}: robot: missing key: `robofmu run` needs the experiment's robot "
+                         "(its analysis uses the robot's model)")
+    roles = Roles.of(system)
+    missing = [r for r in needed if getattr(roles, r) is None]
+    if missing:
+        raise UsageError(f"{source}: roles: `robofmu run` needs the roles {', '.join(needed)}; "
+                         f"missing: {', '.join(missing)}")
+    for role in experiment.ROLES:
+        signal = getattr(roles, role)
+        if signal is None:
+            continue
+        block, _, base = signal.partition(".")
+        node = master.nodes.get(block)
+        if node is None:
+            raise UsageError(f"{source}: roles.{role}: {signal!r} names no block "
+                             f"(blocks: {', '.join(master.nodes)})")
+        outputs = [name for name, v in node.variables.items() if v.causality == "output"]
+        if not expand(outputs, base):
+            bases = sorted({name.split("[")[0] for name in outputs})
+            raise UsageError(f"{source}: roles.{role}: {signal!r} names no output of {block} "
+                             f"(outputs: {', '.join(bases)})")
+    return roles

@@ -17,7 +17,3 @@ def small(unit: str | None) -> tuple[float, str]:
     factor, shown = _SMALL.get(unit or "", (1.0, unit or ""))
     return factor, printed(shown)
 
-
-def unit_of(units: dict, names: list[str]) -> list[str | None]:
-    """The units of ``names`` in a result's ``units`` (None where unknown)."""
-    return [units.get(n) for n in names]

@@ -6,6 +6,10 @@
 - ``robot``: a parametrized fixture, one test per described robot (ids: the robot's name);
   :func:`fmu_util.robot_blocks` gives ``(robot, block)`` parameters with ids like ``rrp-plant``;
 - ``raw_instances``: instances driven through the raw FMI functions (:class:`fmu_util.RawInstance`).
+
+Markers (registered in pyproject.toml): whole modules get theirs from :data:`MODULE_MARKERS` here,
+the one place they are assigned; a single test of 2 s or more carries ``@pytest.mark.slow`` itself.
+``make check`` runs ``pytest -m "not slow and not interop"``; plain ``pytest`` runs everything.
 """
 from __future__ import annotations
 
@@ -16,10 +20,40 @@ import robofmu.components  # noqa: F401  (the installed copy first, before any F
 from robofmu.components.robots import available, load_description, load_model
 
 
+#: Markers of whole test modules, by file name. interop: another FMI tool, process or host runs
+#: the FMUs; slow: (nearly) every test of the module takes 2 s or more; study: a study, sweep or
+#: packaged experiment end to end.
+MODULE_MARKERS = {
+    "test_c_host.py": ("interop",),
+    "test_container.py": ("interop",),
+    "test_ecos.py": ("interop",),
+    "test_experiments.py": ("slow", "study"),            # 14 of its 17 tests take 2 to 24 s
+    "test_fresh_environment.py": ("interop", "slow"),
+    "test_importers.py": ("interop",),
+    "test_interop.py": ("interop",),
+    "test_libcosim.py": ("interop",),
+    "test_many_runs.py": ("slow",),
+    "test_newton_study.py": ("study",),
+    "test_ssp.py": ("interop",),
+    "test_stepresponse.py": ("study",),
+    "test_sweep.py": ("slow", "study"),                  # dask clusters: 10 of its 22 tests take 2 to 30 s
+    "test_sweep_contract.py": ("study",),
+    "test_sweep_design.py": ("study",),
+    "test_sweep_report.py": ("study",),
+}
+
+
+@pytest.hookimpl(tryfirst=True)          # before -m deselects by them
+def pytest_collection_modifyitems(items):
+    for item in items:
+        for name in MODULE_MARKERS.get(item.path.name, ()):
+            item.add_marker(name)
+
+
 @pytest.fixture(scope="session")
 def fmu_root(tmp_path_factory):
     """Root of the FMU collection built from the current sources: ``<root>/<robot>/<block>.fmu``."""
-    from robofmu.system.build import build
+    from robofmu.system.packaging.build import build
 
     out = tmp_path_factory.mktemp("fmus")
     for robot in available():

@@ -1,4 +1,4 @@
-"""Helpers for tests that drive the FMUs through fmpy (via robofmu.system.fmu.Block).
+"""Helpers for tests that drive the FMUs through fmpy (via robofmu.system.fmu.FMUInstance).
 
 - :func:`open_block`: one instantiated, initialized FMU;
 - :func:`robot_blocks`: ``(robot, block)`` test parameters over the whole collection;
@@ -25,12 +25,12 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 from robofmu.components.robots import available, load_description
 from robofmu.system import experiment
 from robofmu.system.check import plan
-from robofmu.system.fmu import Block
+from robofmu.system.fmu import FMUInstance
 
 
 def open_block(fmu_dir, block, name=None, parameters=None, start_time=0.0):
     """Instantiate and initialize ``fmu_dir/<block>.fmu``."""
-    b = Block(Path(fmu_dir) / f"{block}.fmu", name or block)
+    b = FMUInstance(Path(fmu_dir) / f"{block}.fmu", name or block)
     b.initialize(start_time, parameters)
     return b
 
@@ -83,11 +83,11 @@ class Loop:
             system.block(instance).parameters.update(values)
         self.plan = plan(system)
         self.order = list(self.plan.order)
-        self.blocks: dict[str, Block] = {}
+        self.blocks: dict[str, FMUInstance] = {}
         try:
             for instance in self.order:
                 node = self.plan.nodes[instance]
-                b = Block(node.path, instance)
+                b = FMUInstance(node.path, instance)
                 self.blocks[instance] = b
                 b.initialize(0.0, node.spec.parameters)
         except Exception:
@@ -106,7 +106,7 @@ class Loop:
         self._late = {i: [l for l in links if l.target == i and rank[l.source] >= rank[i]] for i in self.order}
         self.t = 0.0
 
-    def __getitem__(self, instance: str) -> Block:
+    def __getitem__(self, instance: str) -> FMUInstance:
         return self.blocks[instance]
 
     def _set(self, instance: str, links, signals: dict) -> None:

@@ -1,4 +1,4 @@
-"""The blocks issue 9 adds for any robot, checked on 3rrp (and the serial arms where generic):
+"""The generic blocks a closed-chain robot needs, checked on 3rrp (and the serial arms where generic):
 the circle profile, the jacobian block, the plant with an end-effector wrench, the controller
 starting at home.
 

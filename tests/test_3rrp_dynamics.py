@@ -172,6 +172,7 @@ def energy_start() -> tuple[np.ndarray, np.ndarray]:
     return p, np.concatenate([LAG.joint_rates(p, zd), zd])
 
 
+@pytest.mark.slow
 def test_energy_conserved_and_loops_closed_without_actuation():
     """RK4, fixed step 1 ms, 5 s, tau = 0, f_ext = 0: |T - T0| / T0 < 1e-8, |Phi| < 1e-9 m."""
     p0, pd0 = energy_start()
@@ -190,6 +191,7 @@ def test_energy_conserved_and_loops_closed_without_actuation():
     assert residual[:, 1].max() < 1e-9
 
 
+@pytest.mark.slow
 def test_loops_stay_closed_without_baumgarte():
     # the residual bound is the integrator's, not the stabilization's doing
     free = spec_model(alpha=0.0, beta=0.0)
@@ -267,10 +269,8 @@ def test_formulation_does_not_import_the_robot_model():
 @pytest.fixture(scope="module")
 def model():
     """The robot model of ``3rrp`` (components/robots/parallel.py), imported only here."""
-    from robofmu.components.robots import available, load_model
+    from robofmu.components.robots import load_model
 
-    if "3rrp" not in available():
-        pytest.skip("robot 3rrp is not described yet (components/robots/3rrp/3rrp.toml)")
     return load_model("3rrp")
 
 

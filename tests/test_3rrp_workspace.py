@@ -1,4 +1,4 @@
-"""The workspace analysis (system/workspace.py) on the planar 3-RRP mechanism: radii, orientation
+"""The workspace analysis (system/studies/workspace.py) on the planar 3-RRP mechanism: radii, orientation
 range, isotropy, GII over regions and over refined full joint grids, and the CLI's mistakes.
 
 Run time is not asserted (the report states it)."""
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from robofmu.components.robots import load_model
-from robofmu.system import workspace
+from robofmu.system.studies import workspace
 
 CLI = [sys.executable, "-m", "robofmu.system.cli"]
 
@@ -146,6 +146,7 @@ theta = [-180.0, 180.0]
 """
 
 
+@pytest.mark.slow
 def test_cli_runs_a_study_file(tmp_path):
     (tmp_path / "small.toml").write_text(SMALL)
     done = cli("workspace", "small.toml", "--out", "ws", "--grid", "12", cwd=tmp_path)

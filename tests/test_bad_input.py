@@ -4,13 +4,13 @@ import zipfile
 import numpy as np
 import pytest
 
-from robofmu.system.fmu import Block, FMUError
+from robofmu.system.fmu import FMUInstance, FMUError
 
 from fmu_util import open_block
 
 
 def _failed_init(fmu_dir, block, parameters):
-    b = Block(fmu_dir / f"{block}.fmu", block)
+    b = FMUInstance(fmu_dir / f"{block}.fmu", block)
     with pytest.raises(FMUError) as info:
         b.initialize(0.0, parameters)
     b.close()
@@ -22,7 +22,7 @@ def _failed_init(fmu_dir, block, parameters):
     ("plant", {"g": float("nan")}, "parameter g = nan"),
     ("plant", {"max_substep": 0.0}, "parameter max_substep = 0 s is invalid: must be > 0"),
     ("plant", {"q0[2]": float("inf")}, "parameter q0[2] = inf is invalid"),
-    ("controller", {"kp": -400.0}, "parameter kp = -400 1/s2 is invalid: must be >= 0"),
+    ("controller", {"kp": -400.0}, "parameter kp = -400 1/s2 is invalid: must be > 0"),
     ("controller", {"kd": float("nan")}, "parameter kd = nan"),
     ("controller", {"ki": -1.0}, "parameter ki = -1"),
     ("trajectory", {"waypoints": "0.21 0 0; 0.21 0 zero"}, "waypoints: malformed number"),
@@ -133,7 +133,7 @@ def test_bundled_code_mismatch_fails_loudly(fmu_dir, tmp_path):
                 data += b"\n# edited after the build\n"
             zout.writestr(item, data)
     with pytest.raises(FMUError) as info:
-        Block(dst, "controller")
+        FMUInstance(dst, "controller")
     text = str(info.value)
     assert "fmi2Instantiate failed" in text
     assert "rebuild the FMUs with the same robofmu" in text
@@ -141,7 +141,7 @@ def test_bundled_code_mismatch_fails_loudly(fmu_dir, tmp_path):
 
 def test_missing_fmu_is_named(tmp_path):
     with pytest.raises(FileNotFoundError, match="plant: FMU .*nope.fmu does not exist"):
-        Block(tmp_path / "nope.fmu", "plant")
+        FMUInstance(tmp_path / "nope.fmu", "plant")
 
 
 def test_target_unreachable_from_the_start_warns_once(fmu_dir):

@@ -27,7 +27,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 import elf
-from robofmu.system import fmi_export
+from robofmu.system.packaging import fmi_export
 
 SOURCES = Path(__file__).resolve().parent / "c_host"
 FMI_HEADERS = Path(__import__("fmpy").__file__).resolve().parent / "c-code"
@@ -249,7 +249,8 @@ def test_the_library_needs_no_glibc_newer_than_the_baseline(fmu_root, tmp_path):
     # which the reader sees as newer than the baseline
     if shutil.which("cc"):
         built = tmp_path / "native.so"
-        subprocess.run(["cc", "-shared", "-fPIC", "-o", str(built), str(fmi_export.SOURCE), "-ldl", "-pthread"],
+        subprocess.run(["cc", "-shared", "-fPIC", *fmi_export.compile_flags(tmp_path), "-o", str(built),
+                        str(fmi_export.SOURCE), "-ldl", "-pthread"],
                        check=True, capture_output=True)
         native = {v for vs in elf.version_needs(built.read_bytes()).values() for v in vs if v.startswith("GLIBC_")}
         assert max(tuple(map(int, v[len("GLIBC_"):].split("."))) for v in native) > baseline, sorted(native)

@@ -110,24 +110,24 @@ MISTAKES = {
     "unknown-robot": (["run", "robot.toml"], ["robot.toml: robot: unknown robot 'no-such-robot'"]),
     "unknown-role": (["run", "role.toml"], ["role.toml: roles: unknown role 'speed'"]),
     "malformed-connection": (["run", "wire.toml"], ["wire.toml: connections[1]", "plant.q controller.q"]),
-    "step-zero": (["run", "chess-pd", "--step", "0"], ["--step 0: must be a finite time > 0 s"]),
-    "step-negative": (["run", "chess-pd", "--step", "-0.001"], ["--step -0.001: must be"]),
-    "step-nan": (["run", "chess-pd", "--step", "nan"], ["--step nan: must be"]),
-    "stop-infinite": (["run", "chess-pd", "--stop", "inf"], ["--stop inf: must be"]),
-    "stop-zero": (["run", "chess-pd", "--stop", "0"], ["--stop 0: must be"]),
-    "stop-not-whole": (["run", "chess-pd", "--stop", "0.0105", "--fmus", "{fmus}"],
-                       ["--stop 0.0105 s is not a whole number of steps", "chess-pd.toml"]),
-    "step-not-dividing": (["run", "chess-pd", "--step", "0.003", "--fmus", "{fmus}"],
-                          ["stop time 13 s", "--step 0.003 s", "give --stop"]),
-    "stop-below-step": (["run", "chess-pd", "--stop", "0.0004", "--fmus", "{fmus}"], ["--stop 0.0004 s is shorter"]),
-    "too-many-steps": (["run", "chess-pd", "--step", "1e-9", "--stop", "1000", "--fmus", "{fmus}"],
-                       ["--step 1e-09, --stop 1000", "1000000000000 steps x 35 recorded signals", "memory"]),
-    "absurd-steps": (["run", "chess-pd", "--step", "1e-300", "--stop", "1e300"], ["--step 1e-300", "steps"]),
+    "step-zero": (["run", "chess-pd", "--step-size", "0"], ["--step-size 0: must be a finite time > 0 s"]),
+    "step-negative": (["run", "chess-pd", "--step-size", "-0.001"], ["--step-size -0.001: must be"]),
+    "step-nan": (["run", "chess-pd", "--step-size", "nan"], ["--step-size nan: must be"]),
+    "stop-infinite": (["run", "chess-pd", "--stop-time", "inf"], ["--stop-time inf: must be"]),
+    "stop-zero": (["run", "chess-pd", "--stop-time", "0"], ["--stop-time 0: must be"]),
+    "stop-not-whole": (["run", "chess-pd", "--stop-time", "0.0105", "--fmus", "{fmus}"],
+                       ["--stop-time 0.0105 s is not a whole number of steps", "chess-pd.toml"]),
+    "step-not-dividing": (["run", "chess-pd", "--step-size", "0.003", "--fmus", "{fmus}"],
+                          ["stop time 13 s", "--step-size 0.003 s", "give --stop-time"]),
+    "stop-below-step": (["run", "chess-pd", "--stop-time", "0.0004", "--fmus", "{fmus}"], ["--stop-time 0.0004 s is shorter"]),
+    "too-many-steps": (["run", "chess-pd", "--step-size", "1e-9", "--stop-time", "1000", "--fmus", "{fmus}"],
+                       ["--step-size 1e-09, --stop-time 1000", "1000000000000 steps x 35 recorded signals", "memory"]),
+    "absurd-steps": (["run", "chess-pd", "--step-size", "1e-300", "--stop-time", "1e300"], ["--step-size 1e-300", "steps"]),
     "out-is-a-file": (["run", "chess-pd", "--out", "afile", "--fmus", "{fmus}"],
                       ["--out afile: exists and is a file, not a folder"]),
     "out-under-a-file": (["run", "chess-pd", "--out", "afile/results", "--fmus", "{fmus}"],
                          ["--out afile/results:", "afile is a file, not a folder"]),
-    "out-not-writable": (["run", "chess-pd", "--stop", "0.01", "--out", "{readonly}", "--fmus", "{fmus}"],
+    "out-not-writable": (["run", "chess-pd", "--stop-time", "0.01", "--out", "{readonly}", "--fmus", "{fmus}"],
                          ["--out {readonly}:"]),
     "out-holds-other-files": (["run", "chess-pd", "--out", "mine", "--fmus", "{fmus}"],
                               ["--out mine: holds notes.txt, not written by robofmu"]),
@@ -176,6 +176,7 @@ def answers(work, fmu_root):
         return {name: (futures[name].result(), cases[name][1]) for name in cases}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(MISTAKES))
 def test_a_mistake_is_one_line_naming_it_with_status_2(answers, case, work):
     if "{fmus}" in MISTAKES[case][0]:
@@ -193,12 +194,13 @@ def test_a_mistake_is_one_line_naming_it_with_status_2(answers, case, work):
 
 
 def test_argparse_mistakes_keep_the_usage_line(work):
-    done = cli("run", "chess-pd", "--step", "fast", cwd=work)
+    done = cli("run", "chess-pd", "--step-size", "fast", cwd=work)
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert done.stderr.splitlines()[0].startswith("usage: robofmu run")
-    assert done.stderr.splitlines()[-1] == "robofmu run: error: argument --step: invalid float value: 'fast'"
+    assert done.stderr.splitlines()[-1] == "robofmu run: error: argument --step-size: invalid float value: 'fast'"
 
 
+@pytest.mark.slow
 def test_a_user_file_builds_on_a_packaged_base_and_replaces_the_folder(work, fmu_root):
     """A file outside the package names a packaged experiment (itself built on a packaged base) as
     its base; the run replaces an earlier run's folder whole (no stale figure stays)."""
@@ -210,7 +212,7 @@ def test_a_user_file_builds_on_a_packaged_base_and_replaces_the_folder(work, fmu
     out.mkdir(parents=True)
     for stale in ("results.csv", "report.md", "task_reference.png", "old_figure.png"):
         (out / stale).write_text("from an earlier run\n")
-    done = cli("run", user, "--stop", "0.01", "--out", out, "--fmus", fmu_root, cwd=work)
+    done = cli("run", user, "--stop-time", "0.01", "--out", out, "--fmus", fmu_root, cwd=work)
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
     names = sorted(p.name for p in out.iterdir())
@@ -222,10 +224,11 @@ def test_a_user_file_builds_on_a_packaged_base_and_replaces_the_folder(work, fmu
     assert (out / "report.md").read_text().startswith("# softer")
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_at_a_communication_point_and_keeps_the_results(work, fmu_root):
     sources_unchanged()
     out = work / "interrupted"
-    process = subprocess.Popen([*CLI, "run", "chess-pd", "--stop", "40", "--out", str(out), "--fmus",
+    process = subprocess.Popen([*CLI, "run", "chess-pd", "--stop-time", "40", "--out", str(out), "--fmus",
                                 str(fmu_root)], cwd=work, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     seen = []
     for line in process.stderr:                  # the progress line: the run is stepping
@@ -289,6 +292,7 @@ def test_record_selection_exact_names_vector_bases_patterns(fmu_root):
     assert "'plant.q'" not in text
 
 
+@pytest.mark.slow
 def test_doctor_on_good_fmus(fmu_root, tmp_path):
     sources_unchanged()
     done = cli("doctor", "--fmus", fmu_root, cwd=tmp_path)
@@ -309,6 +313,7 @@ def test_doctor_on_good_fmus(fmu_root, tmp_path):
     assert "problem" not in text and text.rstrip().endswith("everything checks")
 
 
+@pytest.mark.slow
 def test_doctor_names_a_stale_and_a_missing_fmu(work, tmp_path):
     broken = work / "broken"
     done = cli("doctor", "--fmus", broken, cwd=tmp_path)
@@ -323,11 +328,11 @@ def test_doctor_names_a_stale_and_a_missing_fmu(work, tmp_path):
 
 # -- interruptions through the Python API and the CLI keep what was recorded ------------------------
 def test_run_experiment_refuses_an_infinite_stop_time_naming_it(fmu_root, tmp_path):
-    from robofmu.system.runner import UsageError, run_experiment
+    from robofmu.system.run import UsageError, run_experiment
 
     with pytest.raises(UsageError) as info:
         run_experiment("rrp-line", tmp_path / "out", fmu_dir=fmu_root, stop_time=float("inf"), progress=False)
-    assert str(info.value) == "--stop inf: must be a finite time > 0 s"
+    assert str(info.value) == "--stop-time inf: must be a finite time > 0 s"
     assert not (tmp_path / "out").exists() and list(tmp_path.iterdir()) == []
 
 
@@ -348,7 +353,7 @@ def test_run_experiment_interrupted_keeps_the_rows_on_the_exception_and_on_disk(
     """Python API: a KeyboardInterrupt in the progress callback (its 2nd call, after the step to
     0.01 s) raises Interrupted whose result holds the rows t = 0 .. 0.009 s of an uninterrupted
     run; out_dir holds them as results.csv and a report saying so."""
-    import robofmu.system.runner as runner
+    import robofmu.system.run as runner
 
     sources_unchanged()
     reference = Master(experiment.load("rrp-line", fmu_dir=fmu_root)).run(stop_time=0.1)
@@ -386,7 +391,7 @@ def test_cli_run_interrupted_inside_a_block_exits_130_keeping_the_rows(fmu_root,
 
     monkeypatch.setattr(cls, "advance", advance)
     out = tmp_path / "out"
-    status = command.main(["run", "rrp-line", "--stop", "0.1", "--out", str(out), "--fmus", str(fmu_root)])
+    status = command.main(["run", "rrp-line", "--stop-time", "0.1", "--out", str(out), "--fmus", str(fmu_root)])
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.startswith("robofmu")]
     assert status == 130 and "Traceback" not in err
@@ -398,7 +403,7 @@ def test_cli_run_interrupted_inside_a_block_exits_130_keeping_the_rows(fmu_root,
 def test_run_experiment_interrupted_writing_the_results_keeps_them_on_the_exception(fmu_root, tmp_path, monkeypatch):
     """Ctrl-C while the complete results are written: the folder is left as it was (a file cut
     short is not swapped in) and the exception carries all 101 points."""
-    import robofmu.system.runner as runner
+    import robofmu.system.run as runner
 
     sources_unchanged()
 

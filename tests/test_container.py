@@ -18,8 +18,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-pytest.importorskip("fmu_manipulation_toolbox", reason="fmu-manipulation-toolbox is not installed")
-
 from fmpy import read_model_description, simulate_fmu  # noqa: E402
 from fmpy.fmi1 import FMICallException  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
@@ -27,10 +25,10 @@ from fmpy.validation import validate_fmu  # noqa: E402
 from fmu_util import robot_experiments  # noqa: E402
 from robofmu.system import experiment  # noqa: E402
 from robofmu.system.check import Link, plan  # noqa: E402
-from robofmu.system.container import (container_order, export_container,  # noqa: E402
+from robofmu.system.interop.container import (container_order, export_container,  # noqa: E402
                                       model_identifier, run_container)
 from robofmu.system.master import Master, SimulationError  # noqa: E402
-from robofmu.system.validate import problems_of  # noqa: E402
+from robofmu.system.packaging.validate import problems_of  # noqa: E402
 
 STOP = 0.5              # s
 ALGORITHMS = ["gauss-seidel", "jacobi"]
@@ -224,7 +222,7 @@ def test_the_command_writes_a_container_and_answers_mistakes_in_one_line(fmu_roo
 @pytest.mark.parametrize("algorithm", ALGORITHMS)
 def test_a_successful_run_logs_no_error_level_message(containers, algorithm):
     """fmu-manipulation-toolbox 2.0's runtime logs "Solver configure...." with status fmi2Error at
-    every instantiation (compiled in: see robofmu.system.container); robofmu's front library
+    every instantiation (compiled in: see robofmu.system.interop.container); robofmu's front library
     passes it on as fmi2OK, with debug logging only. A successful run logs no error-level message,
     debug logging off (a host's default) or on; the runtime's two warnings stay."""
     system, path = containers("chess-pd", algorithm)
@@ -246,7 +244,7 @@ def test_the_runtime_alone_logs_its_trace_as_an_error(containers, tmp_path):
     logs "Solver configure...." as fmi2Error (what the front library is for)."""
     import zipfile
 
-    from robofmu.system import fmi_export
+    from robofmu.system.packaging import fmi_export
 
     system, path = containers("chess-pd", "jacobi")
     bare = tmp_path / "bare.fmu"

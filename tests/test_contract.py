@@ -13,6 +13,15 @@ FMU runs through libcosim and through ``fmpy.simulate_fmu``.
 Numbers where cheap: a lone FMU's outputs equal those of its FMI-free block driven the same way
 (robofmu.components.blocks), plus closed forms written here (the trajectories' first instants,
 the rpp bang-bang at half time, the FK of rrp and rpp, free fall qdd = M^-1 (-g)).
+
+What every robot model promises, whatever its mechanism (test ids ``<robot>``): J and J-dot q-dot
+are the derivatives of FK; M is symmetric positive definite; T = qd^T M qd / 2, C qd + g = N,
+g = dV/dq, inverse and forward dynamics invert each other, Mdot - 2C is skew; g and V scale with
+the gravity set; T + V is conserved without torque; the reference motion starts at home at rest
+and ends at rest. And every IK solver that accepts a robot (ids ``<robot>-<solver>``) follows its
+reference motion: FK(IK(x)) = x, IK(FK(home)) = home, rates equal differences of its positions.
+The robots' own test modules (test_rrp, test_planar2r, test_3rrp_kinematics, ...) keep what is
+particular to each: its closed forms and the seed's numbers.
 """
 from __future__ import annotations
 
@@ -27,13 +36,15 @@ import numpy as np
 import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
+from scipy.integrate import solve_ivp
 
 from robofmu.components import SOURCE_HASH
 from robofmu.components.blocks import make_block
 from robofmu.components.blocks.text import parse_matrix, parse_vector
+from robofmu.components.ik import solver_class, solvers
 from robofmu.components.robots import available, load_description, load_model
-from robofmu.system.fmu import Block, FMUError
-from robofmu.system.validate import checker_problems, problems_of
+from robofmu.system.fmu import FMUInstance, FMUError
+from robofmu.system.packaging.validate import checker_problems, problems_of
 
 from fmu_util import open_block, robot_blocks
 
@@ -274,7 +285,7 @@ def test_defaults_are_the_descriptions(fmu_root, robot):
 
 
 # -- driving a lone block ------------------------------------------------------------------------------
-def read_outputs(b: Block) -> list:
+def read_outputs(b: FMUInstance) -> list:
     return [b.get(name) for name in b.variables if b.variables[name].causality == "output"]
 
 
@@ -301,7 +312,7 @@ def inputs_at(robot: str, block: str, t: float, k: int) -> dict:
     }
 
 
-def drive(b: Block, robot: str, block: str, k0: int, count: int) -> list:
+def drive(b: FMUInstance, robot: str, block: str, k0: int, count: int) -> list:
     """Steps k0 .. k0 + count - 1: set the inputs, read every output, doStep; then read again."""
     bases = {v.name.split("[")[0] for v in b.variables.values() if v.causality == "input"}
     out = []
@@ -426,7 +437,7 @@ def _invalid_parameters():
     cases = []
     for robot in available():
         for block, parameters, message, what in [
-            ("controller", {"kp": -400.0}, "parameter kp = -400 1/s2 is invalid: must be >= 0", "kp"),
+            ("controller", {"kp": -400.0}, "parameter kp = -400 1/s2 is invalid: must be > 0", "kp"),
             ("controller", {"kd": float("nan")}, "parameter kd = nan 1/s is invalid", "kd"),
             ("plant", {"max_substep": -1e-3}, "parameter max_substep = -0.001 s is invalid: must be > 0",
              "max_substep-negative"),
@@ -455,7 +466,7 @@ def _invalid_parameters():
 
 @pytest.mark.parametrize("robot, block, parameters, message", _invalid_parameters())
 def test_invalid_parameter_fails_initialization_naming_it(fmu_root, robot, block, parameters, message):
-    b = Block(fmu(fmu_root, robot, block), block)
+    b = FMUInstance(fmu(fmu_root, robot, block), block)
     try:
         with pytest.raises(FMUError) as info:
             b.initialize(0.0, parameters)
@@ -563,10 +574,11 @@ def fk_inputs(robot: str) -> list[float]:
     return (home + 0.1 * np.sin(np.arange(1, len(home) + 1))).tolist()
 
 
+@pytest.mark.interop
 @pytest.mark.parametrize("robot, block", ALL)
 def test_every_fmu_runs_through_libcosim(fmu_root, robot, block):
-    pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
-    from robofmu.system.libcosim import CosimRun
+    """libcosimpy is a dev dependency: without it this fails (a contract skips no robot)."""
+    from robofmu.system.interop.libcosim import CosimRun
 
     h, steps = 1e-3, 5
     inputs = {"q": fk_inputs(robot)} if block == "fk" else {}
@@ -654,3 +666,246 @@ def test_plant_with_zero_torque_falls_as_gravity_predicts(fmu_root, robot):
     scale = np.max(np.abs(qdd))
     np.testing.assert_allclose(qd / h, qdd, rtol=0, atol=1e-5 * scale)
     np.testing.assert_allclose(2 * (q - q0) / h**2, qdd, rtol=0, atol=1e-5 * scale)
+
+
+# == the robot model: what every robot's model promises (no FMU) =======================================
+# Each robot's own test module compares its model with its specification (closed forms, seed
+# values, an independent Lagrange derivation). The properties below hold for every model whatever
+# its mechanism; they are checked here once, on every described robot, at the tolerances the
+# robots' modules used when each restated them. Derivatives are fourth-order central differences
+# (error O(h^4)): a finite-difference reference accurate enough for one tolerance on every robot.
+def d1(f, x, v, h):
+    """d/ds f(x + s v) at s = 0 (fourth-order central difference, step h)."""
+    return (f(x - 2 * h * v) - 8 * f(x - h * v) + 8 * f(x + h * v) - f(x + 2 * h * v)) / (12 * h)
+
+
+def d2(f, x, v, h):
+    """d^2/ds^2 f(x + s v) at s = 0 (fourth-order central difference, step h)."""
+    return (-f(x - 2 * h * v) + 16 * f(x - h * v) - 30 * f(x) + 16 * f(x + h * v) - f(x + 2 * h * v)) / (12 * h * h)
+
+
+def task_difference(rm, a, b):
+    """a - b in task coordinates, angles (unit rad) wrapped into [-pi, pi)."""
+    d = np.array(a, dtype=float) - np.array(b, dtype=float)
+    angle = np.array([u == "rad" for u in rm.task_units(0)])
+    d[..., angle] = np.remainder(d[..., angle] + math.pi, 2 * math.pi) - math.pi
+    return d
+
+
+def configurations(rm, count: int, seed: int) -> np.ndarray:
+    """``count`` joint positions uniform within the position limits (home +- pi for an unlimited
+    joint), kept where FK exists (not a direct singularity) and cond J < 1e2."""
+    rng = np.random.default_rng(seed)
+    lower, upper = rm.position_limits()
+    home = rm.configuration("home")
+    lower = np.where(np.isfinite(lower), lower, home - math.pi)
+    upper = np.where(np.isfinite(upper), upper, home + math.pi)
+    found = []
+    while len(found) < count:
+        q = rng.uniform(lower, upper)
+        try:
+            s = np.linalg.svd(rm.jacobian(q), compute_uv=False)
+        except ValueError:                                          # a direct singularity (3rrp)
+            continue
+        if s[-1] > 0 and s[0] / s[-1] < 1e2:
+            found.append(q)
+    return np.array(found)
+
+
+def test_jacobian_is_the_derivative_of_fk(robot):
+    """J = dFK/dq (was in test_planar2r, test_rrp_offset: 1e-9 absolute; test_3rrp_kinematics:
+    1e-7 relative)."""
+    rm = model(robot)
+    for q in configurations(rm, 300, seed=1):
+        J = rm.jacobian(q)
+        fd = np.column_stack([d1(lambda p: task_difference(rm, rm.fk(p), rm.fk(q)), q, e, 1e-4)
+                              for e in np.eye(rm.n)])
+        assert np.max(np.abs(J - fd)) < 1e-9, q
+        assert np.linalg.norm(J - fd) < 1e-7 * np.linalg.norm(J), q
+
+
+def test_jdot_qdot_is_the_derivative_of_j_along_qd_and_the_task_acceleration_at_zero_qdd(robot):
+    """Jdot qd = d/dt [J(q + t qd)] qd = d^2/dt^2 FK(q + t qd) at t = 0 (was in test_planar2r,
+    test_rrp_offset: 1e-8 and 1e-6 absolute; test_3rrp_kinematics: 1e-7 and 1e-5
+    relative)."""
+    rm = model(robot)
+    rng = np.random.default_rng(2)
+    for q in configurations(rm, 200, seed=2):
+        qd = rng.uniform(-2.0, 2.0, rm.n)
+        a = rm.jdot_qdot(q, qd)
+        along = d1(rm.jacobian, q, qd, 3e-5) @ qd
+        assert np.max(np.abs(a - along)) < 1e-8, q
+        assert np.linalg.norm(a - along) < 1e-7 * np.linalg.norm(along), q
+        second = d2(lambda p: task_difference(rm, rm.fk(p), rm.fk(q)), q, qd, 1e-4)
+        assert np.max(np.abs(a - second)) < 1e-6, q
+
+
+def test_mass_matrix_is_symmetric_positive_definite(robot):
+    rm = model(robot)
+    for q in configurations(rm, 200, seed=3):
+        M = rm.mass_matrix(q)
+        np.testing.assert_array_equal(M, M.T)
+        assert np.linalg.eigvalsh(M).min() > 0.0, q
+
+
+def test_dynamics_are_consistent(robot):
+    """T = qd^T M qd / 2; C qd + g = N; g = dV/dq; inverse(forward(tau)) = tau and
+    M qdd + N = tau; Mdot - 2C skew-symmetric (was in lagrange_checks for planar2r and rrp_offset,
+    test_3rrp_kinematics)."""
+    rm = model(robot)
+    rng = np.random.default_rng(4)
+    for q in configurations(rm, 200, seed=4):
+        qd, tau = rng.uniform(-2.0, 2.0, rm.n), rng.uniform(-5.0, 5.0, rm.n)
+        M, C, g = rm.mass_matrix(q), rm.coriolis_matrix(q, qd), rm.gravity_torque(q)
+        assert rm.kinetic_energy(q, qd) == pytest.approx(0.5 * qd @ M @ qd, rel=1e-13)
+        np.testing.assert_allclose(C @ qd + g, rm.nonlinear_effects(q, qd), rtol=1e-12, atol=1e-16)
+        dV = np.array([d1(lambda p: np.array(rm.potential_energy(p)), q, e, 1e-4) for e in np.eye(rm.n)])
+        np.testing.assert_allclose(g, dV, rtol=0, atol=1e-9)
+        qdd = rm.forward_dynamics(q, qd, tau)
+        np.testing.assert_allclose(rm.inverse_dynamics(q, qd, qdd), tau, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(M @ qdd + rm.nonlinear_effects(q, qd), tau, rtol=0, atol=1e-12)
+        Mdot = d1(rm.mass_matrix, q, qd, 1e-4)
+        S = Mdot - 2 * C
+        assert np.max(np.abs(S + S.T)) < 1e-9, q
+        assert np.max(np.abs(S + S.T)) <= 1e-7 * np.max(np.abs(Mdot)) + 1e-12, q
+
+
+def test_gravity_scales_with_set_gravity(robot):
+    """g(q) and V(q) are proportional to the gravity's magnitude; none without gravity."""
+    rm = load_model(robot)                                  # a model of its own: gravity is state
+    g0 = load_description(robot).gravity
+    for q in configurations(rm, 20, seed=5):
+        g, V = rm.gravity_torque(q), rm.potential_energy(q)
+        rm.set_gravity(3.7)
+        np.testing.assert_allclose(rm.gravity_torque(q), 3.7 / g0 * g, rtol=1e-12, atol=1e-15)
+        assert rm.potential_energy(q) == pytest.approx(3.7 / g0 * V, rel=1e-12, abs=1e-15)
+        rm.set_gravity(0.0)
+        assert np.max(np.abs(rm.gravity_torque(q))) < 1e-14
+        assert rm.potential_energy(q) == pytest.approx(0.0, abs=1e-14)
+        rm.set_gravity(g0)
+
+
+def test_energy_is_conserved_without_torque(robot):
+    """Free motion under gravity (DOP853, tolerances 1e-12) for 1 s: T + V within 1e-9 of its
+    start, relative to max(|E0|, T0); the robot really moves (was in test_3rrp_kinematics)."""
+    rm = model(robot)
+    n = rm.n
+    q0 = rm.configuration("home") + 0.05 * np.cos(2.0 * np.arange(n))
+    qd0 = np.cos(np.arange(n) + 0.5)
+
+    def f(_, x):
+        return np.concatenate([x[n:], rm.forward_dynamics(x[:n], x[n:], np.zeros(n))])
+
+    sol = solve_ivp(f, (0.0, 1.0), np.concatenate([q0, qd0]), method="DOP853", rtol=1e-12, atol=1e-12,
+                    t_eval=np.linspace(0.0, 1.0, 101))
+    assert sol.success
+    energy = np.array([rm.kinetic_energy(x[:n], x[n:]) + rm.potential_energy(x[:n]) for x in sol.y.T])
+    scale = max(abs(energy[0]), rm.kinetic_energy(q0, qd0))
+    assert np.max(np.abs(energy - energy[0])) < 1e-9 * scale
+    assert np.max(np.abs(sol.y[:n, -1] - q0)) > 0.1
+
+
+def test_the_reference_starts_at_home_at_rest_and_ends_at_rest(robot):
+    """The trajectory block's profile: at t = 0 the home configuration (or its FK), velocity 0;
+    at its end velocity 0."""
+    rm = model(robot)
+    block = make_block(robot, "trajectory")
+    block.configure()
+    x, xd, _ = block.profile.evaluate(0.0)
+    home = rm.configuration("home")
+    if joint_space(block):
+        np.testing.assert_allclose(x, home, rtol=0, atol=1e-15)
+    else:
+        np.testing.assert_allclose(task_difference(rm, x, rm.fk(home)), 0.0, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(xd, np.zeros(len(xd)))
+    _, xd_end, _ = block.profile.evaluate(block.profile.duration)
+    np.testing.assert_array_equal(xd_end, np.zeros(len(xd_end)))
+
+
+def joint_space(block) -> bool:
+    """Whether a trajectory block's reference is in joint space (q_ref) rather than task space."""
+    return any(v.name.startswith("q_ref[") for v in block.variables)
+
+
+def task_reference(robot: str):
+    """The robot's reference motion in task space: ``(evaluate, breakpoints, duration)`` of its
+    trajectory block's profile, or for a joint-space profile of its image by FK
+    (x = FK(q), xd = J qd, xdd = J qdd + Jdot qd)."""
+    block = make_block(robot, "trajectory")
+    block.configure()
+    profile = block.profile
+    if not joint_space(block):
+        return profile.evaluate, np.asarray(profile.breakpoints), profile.duration
+    rm = model(robot)
+
+    def evaluate(t):
+        q, qd, qdd = profile.evaluate(t)
+        J = rm.jacobian(q)
+        return rm.fk(q), J @ qd, J @ qdd + rm.jdot_qdot(q, qd)
+
+    return evaluate, np.asarray(profile.breakpoints), profile.duration
+
+
+def _accepting_solvers():
+    """(robot, solver kind) for every IK solver whose constructor accepts the robot's model with its
+    default parameters (a solver refuses a robot that is not its mechanism by ValueError)."""
+    pairs = []
+    for robot in available():
+        for kind in solvers():
+            try:
+                solver_class(kind)(load_model(robot))
+            except ValueError:
+                continue
+            pairs.append(pytest.param(robot, kind, id=f"{robot}-{kind}"))
+    return pairs
+
+
+def test_every_robot_with_an_ik_table_is_solved_by_its_solver():
+    """The description's solver is among the accepting ones below, for every robot with [ik]."""
+    kinds = {(p.values[0], p.values[1]) for p in _accepting_solvers()}
+    for robot in available():
+        ik = load_description(robot).ik
+        if ik is not None:
+            assert (robot, ik.kind) in kinds, robot
+
+
+@pytest.mark.parametrize("robot, kind", _accepting_solvers())
+def test_ik_solver_follows_the_reference_motion(robot, kind):
+    """Every IK solver that accepts a robot, with its default parameters, along the robot's
+    reference motion (sampled every 1 ms): FK(IK(x)) = x to 1e-12; IK(FK(home)) = home to 1e-15;
+    away from the profile's breakpoints (where the acceleration jumps) its rates qd, qdd equal
+    central differences of its positions (1e-8, 5e-4; fourth order, h = 1 ms, so that an iterative
+    solver's residual, up to its tolerance 1e-12, stays below them) and, for a robot with an IK
+    block, stay within a tenth of the velocity limits (the block's default qd_limit). Was in
+    test_ik (chess), test_planar2r and test_rrp_offset."""
+    rm = model(robot)
+    ik = solver_class(kind)(rm)
+    has_ik = load_description(robot).ik is not None
+    home = rm.configuration("home")
+    np.testing.assert_allclose(ik.position(rm.fk(home)), home, rtol=0, atol=1e-15)
+    evaluate, breakpoints, duration = task_reference(robot)
+    targets, reached, q = [], [], None
+    for t in np.arange(0.0, duration + 1e-9, 1e-3):
+        x = evaluate(t)[0]
+        ik.start_from(q)                                   # as the IK block does: from its last solution
+        q = ik.position(x)
+        targets.append(x)
+        reached.append(rm.fk(q))
+    worst = float(np.max(np.abs(task_difference(rm, reached, targets))))
+    assert worst < 1e-12, worst
+    ik.start_from(None)
+    times = np.arange(0.01, duration, 0.013)
+    h, checked = 1e-3, 0
+    for t in times:
+        if np.min(np.abs(t - breakpoints)) < 2.5 * h:      # the stencil reaches 2 h either side
+            continue
+        q, qd, qdd = ik.solve(*evaluate(t))
+        ik.start_from(q)
+        qm2, qm1, qp1, qp2 = (ik.position(evaluate(t + k * h)[0]) for k in (-2, -1, 1, 2))
+        np.testing.assert_allclose(qd, (qm2 - 8 * qm1 + 8 * qp1 - qp2) / (12 * h), rtol=0, atol=1e-8)
+        np.testing.assert_allclose(qdd, (-qm2 + 16 * qm1 - 30 * q + 16 * qp1 - qp2) / (12 * h * h),
+                                   rtol=0, atol=5e-4)
+        if has_ik:                                         # the reference its IK block follows
+            assert np.all(np.abs(qd) < 0.1 * rm.velocity_limits()), t
+        checked += 1
+    assert checked > 0.9 * len(times)

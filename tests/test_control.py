@@ -4,8 +4,9 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from robofmu.components.control import ComputedTorque
-from robofmu.components.robots import RobotModel, available, load_model
+from robofmu.components.blocks import make_block
+from robofmu.components.control import GAINS, ComputedTorque, check_gains
+from robofmu.components.robots import RobotModel, available, load_description, load_model
 
 
 def closed_loop(plant: RobotModel, law: ComputedTorque, q_ref, q0, t_end):
@@ -88,11 +89,38 @@ def test_integral_advances_with_the_held_error():
     np.testing.assert_allclose(law.z, [0.005, 0, 0, -0.0025])
 
 
-@pytest.mark.parametrize("name, kwargs", [("kp", dict(kp=-1.0, kd=1.0)), ("kd", dict(kp=1.0, kd=np.nan)),
-                                          ("ki", dict(kp=1.0, kd=1.0, ki=-0.1))])
-def test_invalid_gain_names_it(name, kwargs):
-    with pytest.raises(ValueError, match=f"{name}: gain must be finite and >= 0"):
+@pytest.mark.parametrize("name, kwargs, rule", [
+    ("kp", dict(kp=-1.0, kd=1.0), "> 0"), ("kd", dict(kp=1.0, kd=np.nan), "> 0"),
+    ("ki", dict(kp=1.0, kd=1.0, ki=-0.1), ">= 0"),
+    ("kp", dict(kp=0.0, kd=1.0), "> 0"), ("kd", dict(kp=1.0, kd=0.0), "> 0"),       # no restoring force, no damping
+])
+def test_invalid_gain_names_it(name, kwargs, rule):
+    with pytest.raises(ValueError, match=rf"{name}: parameter {name} = \S+ \S+ is invalid: must be {rule}$"):
         ComputedTorque(load_model("chess"), **kwargs)
+
+
+def test_one_gain_rule_for_the_law_the_block_and_the_descriptions():
+    """kp > 0, kd > 0, ki >= 0: GAINS bounds the controller block's parameters (gain_scale > 0 keeps
+    the scaled gains within it), every described gain set keeps it, the block starts at the
+    description's default_gains."""
+    assert [(r.name, r.low, r.above, r.default) for r in GAINS] == [("kp", None, 0.0, None), ("kd", None, 0.0, None),
+                                                                      ("ki", 0.0, None, 0.0)]
+    assert check_gains(400, 20) == (400.0, 20.0, 0.0)
+    for robot in available():
+        description = load_description(robot)
+        for gains in description.gains.values():
+            assert check_gains(gains.kp, gains.kd, gains.ki) == (gains.kp, gains.kd, gains.ki)
+        if "controller" not in description.blocks:
+            continue
+        block = make_block(robot, "controller")
+        start = description.gain_set(description.default_gains)
+        for rule in GAINS:
+            variable = block.variables[block.index[rule.name]]
+            bounds = (variable.parameter.low, variable.parameter.above, variable.unit)
+            assert bounds == (rule.low, rule.above, rule.unit)
+            assert variable.start == getattr(start, rule.name)
+        scale = block.variables[block.index["gain_scale"]].parameter
+        assert (scale.low, scale.above) == (None, 0.0)
 
 
 @pytest.mark.parametrize("robot", available())

@@ -310,6 +310,7 @@ def _sympy_lagrange_nonlinear():
     return sp.lambdify([q, qd], h, "numpy")
 
 
+@pytest.mark.slow
 def test_nonlinear_effects_match_sympy_christoffel(robot):
     h = _sympy_lagrange_nonlinear()
     err = 0.0

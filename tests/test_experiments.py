@@ -7,7 +7,7 @@ import pytest
 from robofmu.components.robots import load_model
 from robofmu.components.trajectory import StraightLine
 from robofmu.system import experiment
-from robofmu.system.analysis import tracking
+from robofmu.system.analysis import tracking_metrics
 from robofmu.system.master import Master
 from robofmu.system.roles import Roles
 
@@ -31,7 +31,7 @@ def test_rrp_line_keeps_the_tcp_within_0_1_mm_of_the_path(fmu_root):
     x_ref = np.array([line.evaluate(t)[0] for t in result.time])
     np.testing.assert_allclose(result.vector("trajectory.x_ref"), x_ref, rtol=0, atol=1e-15)
     assert np.linalg.norm(tcp - x_ref, axis=1).max() < 1e-4
-    metrics = tracking(result, Roles.of(system))              # every task coordinate is a length
+    metrics = tracking_metrics(result, Roles.of(system))              # every task coordinate is a length
     np.testing.assert_allclose(metrics.tcp_error, np.linalg.norm(tcp - x_ref, axis=1), rtol=0, atol=1e-15)
     assert metrics.orientation_error is None
     np.testing.assert_allclose(result.vector("fk.x"), tcp, rtol=0, atol=1e-15)
@@ -43,7 +43,7 @@ def test_rrp_line_keeps_the_tcp_within_0_1_mm_of_the_path(fmu_root):
 def test_rpp_bangbang_tracks_within_1_mrad_1_mm_and_ends_at_rest(fmu_root):
     system, result = run("rpp-bangbang", fmu_root)
     roles = Roles.of(system)
-    m = tracking(result, roles)
+    m = tracking_metrics(result, roles)
     assert m.joint_units == ["rad", "m", "m"] and m.effort_units == ["N.m", "N", "N"]
     assert m.max_error.max() < 1e-3
     q_end = result.vector("plant.q")[-1]
@@ -169,7 +169,7 @@ def test_3rrp_circle_tracks_the_pose_within_0_1_mm_and_0_1_mrad_and_ends_at_rest
     assert position_error.max() < 1e-4 and angle_error.max() < 1e-4
     # the report's task-point error is the distance in (x, y) (m), the angle apart (rad): not one
     # norm over metres and radians
-    metrics = tracking(result, Roles.of(system))
+    metrics = tracking_metrics(result, Roles.of(system))
     np.testing.assert_allclose(metrics.tcp_error, position_error, rtol=0, atol=1e-15)
     np.testing.assert_allclose(metrics.orientation_error, angle_error, rtol=0, atol=1e-15)
     check_pose_outputs(model, result)
@@ -260,7 +260,7 @@ def test_3rrp_runs_write_the_mechanism_figure_and_an_unactuated_run_has_no_effor
     model sketches itself);
     an unactuated run (no tau role) has no efforts figure and no peak effort; inputs the
     experiment gives values (plant.tau, plant.f_ext, ik.x_ref) are not warned about."""
-    from robofmu.system.runner import run_experiment
+    from robofmu.system.run import run_experiment
 
     free = run_experiment("3rrp-disturbance-unactuated-fxy", tmp_path / "free", fmu_dir=fmu_root,
                           stop_time=0.05, progress=False)
@@ -289,7 +289,7 @@ def test_3rrp_unactuated_run_agrees_with_the_independent_lagrange_formulation(fm
     (at rest at home) and step (RK4, 1 ms) over the run: its constraint residual stays at
     round-off and its q(t) matches the plant's. Seen: max |Phi| 6.6e-16 m, max |dq| 8.2e-14 rad
     (the largest of the four load cases: |Phi| 1.1e-14 m under fxy)."""
-    from robofmu.system.crosscheck import cross_check
+    from robofmu.system.studies.crosscheck import cross_check
 
     system, result = run("3rrp-disturbance-unactuated-mz", fmu_root)
     check = cross_check(system, result, Roles.of(system))
@@ -304,7 +304,7 @@ def test_3rrp_unactuated_run_agrees_with_the_independent_lagrange_formulation(fm
 
 
 def test_cross_check_needs_a_model_with_a_second_formulation_and_unwired_plant_inputs(fmu_root):
-    from robofmu.system.crosscheck import cross_check, has_independent_dynamics
+    from robofmu.system.studies.crosscheck import cross_check, has_independent_dynamics
 
     serial = experiment.load("rrp-line", fmu_dir=fmu_root)
     assert not has_independent_dynamics(Roles.of(serial).model())

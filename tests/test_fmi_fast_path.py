@@ -22,7 +22,7 @@ from robofmu.components.fmi.base import BlockSlave
 from robofmu.components.robots import available
 from robofmu.system import experiment
 from robofmu.system.master import Master
-from robofmu.system.replica import InProcessDiagram
+from robofmu.system.studies.replica import InProcessDiagram
 
 from fmu_util import ERROR, H, OK, RawInstance, robot_blocks
 
@@ -364,13 +364,15 @@ int main(int argc, char** argv)
 """
 
 
+@pytest.mark.interop
 def test_a_host_that_is_not_python_gets_the_same_through_the_fast_path(fmu_root, tmp_path):
     """A C program started with an empty environment (no libpython preloaded, no PATH): robofmu's
     library loads the Python the FMU records, pythonfmu starts the interpreter, the FMI calls come
     from a thread that never ran Python."""
     import subprocess
 
-    from robofmu.system import doctor, fmi_export
+    from robofmu.system.packaging import doctor
+    from robofmu.system.packaging import fmi_export
 
     library = doctor.libpython()
     if library is None or not library.is_file():

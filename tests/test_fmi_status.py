@@ -1,5 +1,5 @@
 """FMI statuses and logging as the FMI 2.0 standard means them: robofmu's export library
-(``robofmu.system.fmi_export``) in front of pythonfmu 0.7.0's.
+(``robofmu.system.packaging.fmi_export``) in front of pythonfmu 0.7.0's.
 
 - a refused step is fmi2Error (pythonfmu alone: fmi2Discard, which fmpy's ``simulate_fmu``
   takes for a normal end), and ``simulate_fmu`` raises with the FMU's message logged;
@@ -28,15 +28,11 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 
-import robofmu.components.fmi.base as base
-from robofmu.system import fmi_export
+from robofmu.components.fmi import contract
+from robofmu.system.packaging import fmi_export
 
 from fmu_util import DISCARD, ERROR, FATAL, H, LABEL, OK, RawInstance, keep_alive
 
-# base.py opts in by logging failures with the status category; until it does, the FMUs' calls
-# keep pythonfmu's statuses (the library forwards them unchanged) and these checks must fail.
-needs_base = pytest.mark.xfail(not hasattr(base, "STATUS_CATEGORY"), strict=True,
-                               reason="components/fmi/base.py does not log with robofmu's status category yet")
 
 
 @pytest.fixture
@@ -77,17 +73,21 @@ def test_library_matches_the_fmi2_headers(tmp_path):
     headers = Path(fmpy.__file__).parent / "c-code"
     cc = fmi_export._compiler()
     done = subprocess.run(cc + ["-shared", "-fPIC", "-Wall", "-Werror", "-DROBOFMU_CHECK_WITH_FMI2_HEADERS",
-                                f"-I{headers}", "-o", str(tmp_path / "check.so"), str(fmi_export.SOURCE)],
+                                f"-I{headers}", *fmi_export.compile_flags(tmp_path), "-o", str(tmp_path / "check.so"),
+                                str(fmi_export.SOURCE)],
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
 
 
 def test_the_status_category_is_the_same_on_both_sides():
-    if hasattr(base, "STATUS_CATEGORY"):
-        assert base.STATUS_CATEGORY == fmi_export.STATUS_CATEGORY
-        assert base._PYTHONFMU_LIBRARY == fmi_export.STOCK_LIBRARY
-    assert f'"{fmi_export.STATUS_CATEGORY}"' in fmi_export.SOURCE.read_text()
-    assert f'"{fmi_export.STOCK_LIBRARY}"' in fmi_export.SOURCE.read_text()
+    """One definition (the contract): the slave, the export package and the C library's
+    generated header all take it from there, and the C source has no copy of its own."""
+    assert fmi_export.STATUS_CATEGORY is contract.STATUS_CATEGORY
+    assert fmi_export.STOCK_LIBRARY is contract.STOCK_LIBRARY
+    header = fmi_export.contract_header.header()
+    assert f'#define STATUS_CATEGORY "{contract.STATUS_CATEGORY}"' in header.splitlines()
+    assert f'#define STOCK_LIBRARY "{contract.STOCK_LIBRARY}"' in header.splitlines()
+    fmi_export.check_source(fmi_export.SOURCE)
 
 
 def test_a_failing_compiler_fails_the_build_loudly(tmp_path, monkeypatch):
@@ -129,7 +129,6 @@ def test_refused_step_message_reaches_the_logger(importer, plant, logging_on):
     assert all(c != fmi_export.STATUS_CATEGORY for _, c, _ in p.messages)      # never seen by the importer
 
 
-@needs_base
 @pytest.mark.parametrize("logging_on", [False, True], ids=["loggingOn-false", "loggingOn-true"])
 def test_refused_step_is_an_error_not_a_discard(importer, plant, logging_on):
     p = importer(plant, "plant", logging_on)
@@ -139,7 +138,6 @@ def test_refused_step_is_an_error_not_a_discard(importer, plant, logging_on):
     assert p.step(H) == ERROR
 
 
-@needs_base
 def test_simulate_fmu_raises_instead_of_truncating(plant):
     md = read_model_description(str(plant), validate=False)
     names = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
@@ -158,7 +156,6 @@ def test_simulate_fmu_raises_instead_of_truncating(plant):
                for status, m in messages), messages
 
 
-@needs_base
 def test_invalid_parameter_is_an_error_naming_it(importer, plant):
     p = importer(plant, "plant")
     assert p.initialize({"payload_mass": -1.0}) == ERROR
@@ -167,7 +164,6 @@ def test_invalid_parameter_is_an_error_naming_it(importer, plant):
     assert not p.texts("FATAL")
 
 
-@needs_base
 def test_a_rejected_set_is_an_error_and_the_instance_goes_on(importer, plant):
     p = importer(plant, "plant")
     assert p.initialize() == OK

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from robofmu.components.fmi.base import NOT_UTF8
+from robofmu.components.fmi.contract import NOT_UTF8
 from robofmu.components.robots import available, load_model
-from robofmu.system.fmu import Block, FMUError
+from robofmu.system.fmu import FMUInstance, FMUError
 
 from fmu_util import ERROR, OK, open_block, robot_blocks
 
@@ -30,7 +30,7 @@ def status_of(exc: Exception) -> str:
     return found.group(1)
 
 
-def refused(block: Block, call: str, fn, *args) -> tuple[str, str]:
+def refused(block: FMUInstance, call: str, fn, *args) -> tuple[str, str]:
     """Call ``fn(*args)``, expect a refusal; its status and the messages logged meanwhile."""
     since = len(block.messages)
     with pytest.raises((FMUError, FMICallException)) as info:
@@ -39,7 +39,7 @@ def refused(block: Block, call: str, fn, *args) -> tuple[str, str]:
     return status_of(info.value), logged
 
 
-def outputs(block: Block) -> list:
+def outputs(block: FMUInstance) -> list:
     names = [v.name for v in block.md.modelVariables if v.causality == "output" and v.type == "Real"]
     return block.get_real([block.variables[n].valueReference for n in names])
 
@@ -47,7 +47,7 @@ def outputs(block: Block) -> list:
 # -- calls in the wrong state ----------------------------------------------------------------------
 @pytest.mark.parametrize("robot, kind", ALL)
 def test_do_step_before_initialization_is_refused(fmu_root, robot, kind):
-    b = Block(fmu_root / robot / f"{kind}.fmu", kind)
+    b = FMUInstance(fmu_root / robot / f"{kind}.fmu", kind)
     try:
         status, logged = refused(b, "fmi2DoStep", b.slave.doStep, 0.0, H)
         assert status in ("discard", "error")
@@ -275,7 +275,7 @@ def test_ik_rates_beyond_qd_limit_count_as_not_reachable(fmu_root):
      "initialization failed: waypoints: rows 1 and 2 are too far apart: coordinate 1 goes from 1e+308 to -1e+308"),
 ], ids=["open-before-close", "open-without-close", "tiny-duration", "huge-waypoints"])
 def test_trajectory_refuses_inconsistent_or_non_finite_references(fmu_root, parameters, message):
-    b = Block(fmu_root / "chess" / "trajectory.fmu", "trajectory")
+    b = FMUInstance(fmu_root / "chess" / "trajectory.fmu", "trajectory")
     try:
         with pytest.raises(FMUError) as info:
             b.initialize(0.0, parameters)
@@ -309,7 +309,7 @@ def test_value_reference_of_the_wrong_type_is_an_error_naming_the_variable(fmu_r
 def test_bad_parameter_through_simulate_fmu_raises_with_the_fmus_message(fmu_root, robot, block_first, capfd):
     """fmpy.simulate_fmu with its defaults (debug logging off, its own printing logger): the run
     raises fmi2Error and the user sees the FMU's message naming the parameter, also once a robofmu
-    Block has registered its logger with fmpy's process-wide logger proxy."""
+    FMUInstance has registered its logger with fmpy's process-wide logger proxy."""
     from fmpy import simulate_fmu
 
     if block_first:

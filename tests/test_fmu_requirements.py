@@ -2,7 +2,7 @@
 the Python version, in the model description.
 
 requirements.txt is derived at build time from the bundled code's imports
-(robofmu.system.requirements). The reference here is independent of that module: the test reads
+(robofmu.system.packaging.requirements). The reference here is independent of that module: the test reads
 the Python files inside the FMU zip itself (its own ast walk), finds the distribution owning each
 imported module by the module's file on disk (importlib.util.find_spec against every installed
 distribution's file list, not packages_distributions), and takes the specifiers from
@@ -27,7 +27,7 @@ from pythonfmu import deploy
 
 import robofmu.components as components
 from fmu_util import robot_blocks
-from robofmu.system.requirements import UnmappedImport, requirement_lines
+from robofmu.system.packaging.requirements import UnmappedImport, requirement_lines
 
 PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
 PYTHON = f"{sys.version_info.major}.{sys.version_info.minor}"
@@ -103,7 +103,7 @@ def test_fmu_declares_its_requirements_and_python(fmu_root, robot, kind, monkeyp
     assert f"Runs in Python {PYTHON} with the packages of resources/requirements.txt" in root.get("description")
     # pythonfmu deploy finds the file and hands it to pip (the install itself is not run here)
     calls = []
-    monkeypatch.setattr(deploy.subprocess, "run", lambda args, **kw: calls.append(args))
+    monkeypatch.setattr(deploy.subprocess, "run", lambda args, **_kw: calls.append(args))
     deploy.deploy(path)
     assert calls and "pip" in " ".join(map(str, calls[0])) and any("requirements" in str(a) for a in calls[0])
 
@@ -118,10 +118,10 @@ def _package_with(tmp_path: Path, source: str) -> Path:
     return package
 
 
+@pytest.mark.slow
 def test_a_new_third_party_import_becomes_a_requirement(tmp_path, monkeypatch):
     """A bundled module importing yaml (PyYAML: installed, robofmu declares no requirement on it):
     the derivation lists it at >= its installed version, and a FMU built from that code carries it."""
-    pytest.importorskip("yaml")
     version = metadata.version("PyYAML")
     package = _package_with(tmp_path, "import json\nimport yaml\nfrom robofmu.components import robots\n"
                                       "from . import model\n\n\ndef load(text):\n    import yaml.constructor\n")
@@ -130,7 +130,7 @@ def test_a_new_third_party_import_becomes_a_requirement(tmp_path, monkeypatch):
     assert requirement_lines(Path(components.__file__).parent) == \
         [line for line in expected if "PyYAML" not in line]
     # the build writes it into the FMU (the staged copy is scanned, not the installed sources)
-    from robofmu.system.build import build
+    from robofmu.system.packaging.build import build
 
     monkeypatch.setattr(components, "__file__", str(package / "__init__.py"))
     monkeypatch.setattr(components, "SOURCE_HASH", components.source_hash(package))    # its check_bundle
@@ -141,13 +141,14 @@ def test_a_new_third_party_import_becomes_a_requirement(tmp_path, monkeypatch):
         assert lines == expected == _reference_lines(_bundled_sources(archive))
 
 
+@pytest.mark.slow
 def test_an_import_no_distribution_provides_fails_the_build(tmp_path, monkeypatch):
     package = _package_with(tmp_path, '"""extra"""\nimport math\nimport robofmu_no_such_module_zq.sub as s\n')
     with pytest.raises(UnmappedImport) as failure:
         requirement_lines(package.parent)
     assert "'robofmu_no_such_module_zq'" in str(failure.value)
     assert "robofmu/components/robots/extra.py line 3" in str(failure.value)
-    from robofmu.system.build import build
+    from robofmu.system.packaging.build import build
 
     monkeypatch.setattr(components, "__file__", str(package / "__init__.py"))
     with pytest.raises(ValueError, match=r"'robofmu_no_such_module_zq' \(robofmu/components/robots/extra.py line 3\)"):
@@ -155,10 +156,11 @@ def test_an_import_no_distribution_provides_fails_the_build(tmp_path, monkeypatc
     assert not list((tmp_path / "fmus").rglob("*.fmu"))
 
 
+@pytest.mark.slow
 def test_doctor_checks_what_the_fmus_declare(fmu_root):
     """robofmu doctor's packages for the FMUs are the FMUs' requirements.txt, but pythonfmu (every
     FMU carries its own copy): one derivation for both."""
-    from robofmu.system.doctor import requirements
+    from robofmu.system.packaging.doctor import requirements
 
     with zipfile.ZipFile(fmu_root / "chess" / "plant.fmu") as archive:
         _, lines = _split(archive.read("resources/requirements.txt").decode())

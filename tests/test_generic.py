@@ -8,7 +8,6 @@ from __future__ import annotations
 import io
 import re
 import tokenize
-import tomllib
 from pathlib import Path
 
 import pytest

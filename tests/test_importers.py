@@ -9,13 +9,13 @@ rrp-line, rpp-bangbang), so it also mixes the robots' FMUs in one process. What 
   its run): fixed in components/fmi/base.py (``_own_description``); a second run in the same
   process failed to instantiate.
 - pythonfmu 0.7.0 writes into freed memory at every exit of a process that instantiated one of
-  its FMUs (system/libcosim.py, "Process exit"): its static ``std::shared_ptr`` of Python state
+  its FMUs (system/interop/libcosim.py, "Process exit"): its static ``std::shared_ptr`` of Python state
   is destroyed by the C++ atexit destructor, then ``onLibraryUnload`` (run by ``_dl_fini``)
   decrements a counter in the freed control block. Found with valgrind ("Invalid read of size
   4 at finalizePythonInterpreter ... inside a block of size 128 free'd"); it shows as "corrupted
   double-linked list" (SIGABRT) or a segfault after the script's last line, in a few percent of
   the processes that ran two simulations. Fixed in robofmu's export library
-  (system/fmi_export/robofmu_fmi2.c, point 3): it registers pythonfmu's
+  (system/packaging/fmi_export/robofmu_fmi2.c, point 3): it registers pythonfmu's
   ``finalizePythonInterpreter`` as an exit handler owned by pythonfmu's library, which ``exit()``
   runs (after the interpreter's finalization) before that library's destructors; a script that
   imports nothing of robofmu exits cleanly too. The runners (``run_ssp_fmpy``, ``CosimRun``)
@@ -47,9 +47,7 @@ import pytest
 from robofmu.components.robots import load_description, load_model
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
-from robofmu.system.ssp import export_ssp
-
-pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
+from robofmu.system.interop.ssp import export_ssp
 
 EXPERIMENTS = ["chess-pd", "rrp-line", "rpp-bangbang"]
 STOP, H = 1.0, 1e-3              # s: chess's first move, rrp's line accelerating and cruising, rpp's switch
@@ -116,8 +114,8 @@ RUNNERS = CHECKER + textwrap.dedent('''
     import json, sys
     from pathlib import Path
     import numpy as np
-    from robofmu.system.libcosim import CosimRun
-    from robofmu.system.ssp import run_ssp_fmpy, run_ssp_libcosim
+    from robofmu.system.interop.libcosim import CosimRun
+    from robofmu.system.interop.ssp import run_ssp_fmpy, run_ssp_libcosim
 
     mode, out, stop, h, jobs = sys.argv[1], Path(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), json.loads(sys.argv[5])
     fmu_root = sys.argv[6]
@@ -237,9 +235,9 @@ INSTANCES = CHECKER + textwrap.dedent('''
     from fmpy.fmi2 import FMU2Slave
     import robofmu.components  # noqa: F401  (the installed copy, as the FMUs were built from it)
     from robofmu.components.robots import load_description, load_model
-    from robofmu.system.libcosim import guard_pythonfmu_exit
+    from robofmu.system.interop.libcosim import guard_pythonfmu_exit
 
-    guard_pythonfmu_exit()                   # system/libcosim.py: for fmpy used directly
+    guard_pythonfmu_exit()                   # system/interop/libcosim.py: for fmpy used directly
     root, H, STEPS = Path(sys.argv[1]), 1e-3, 5
     T = STEPS * H
     home = {r: np.array(load_description(r).configuration("home")) for r in ("chess", "rrp", "rpp")}

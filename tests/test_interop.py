@@ -1,17 +1,15 @@
-"""The demo's table of other FMI tools (robofmu.system.interop): what each row measures."""
+"""The demo's table of other FMI tools (robofmu.system.interop.compare): what each row measures."""
 from __future__ import annotations
 
 import importlib.util
 import math
 
-import pytest
 
 from robofmu.system import experiment
-from robofmu.system.interop import compare_tools
+from robofmu.system.interop.compare import compare_tools
 
 
 def test_every_tool_against_the_master(fmu_root, tmp_path):
-    pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
     runs = compare_tools(experiment.load("rpp-bangbang", fmu_dir=fmu_root), 0.2, tmp_path)
     assert [(r.tool, r.algorithm, r.compared) for r in runs] == [
         ("container (fmpy)", "gauss-seidel", "every output"), ("container (fmpy)", "jacobi", "every output"),

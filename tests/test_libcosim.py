@@ -13,7 +13,7 @@ preload, since the FMU binary has no DT_NEEDED entry for libpython; not tested h
 and fmpy's alike, share that one interpreter, and therefore the one ``robofmu.components``
 imported first (conftest imports the installed copy; the FMUs check theirs matches).
 
-Things libcosimpy 0.0.6 cannot do directly and how this file copes (see system/libcosim.py):
+Things libcosimpy 0.0.6 cannot do directly and how this file copes (see system/interop/libcosim.py):
 
 - There is no direct fmi2GetReal/fmi2SetReal: values are read through observers (last-value,
   time-series) and written as initial values (before the first step) or through the override
@@ -43,13 +43,11 @@ import textwrap
 import numpy as np
 import pytest
 
-pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
-
 from fmpy import simulate_fmu  # noqa: E402
 
 from robofmu.components.ik import make_solver  # noqa: E402
 from robofmu.components.robots import load_description, load_model  # noqa: E402
-from robofmu.system.libcosim import CosimRun  # noqa: E402
+from robofmu.system.interop.libcosim import CosimRun  # noqa: E402
 
 STEP = 1e-3            # s, communication step of libcosim's fixed-step algorithm
 T_END = 0.2            # s
@@ -306,7 +304,7 @@ def test_failed_initialization_aborts_the_process(fmu_dir, tmp_path):
     script = textwrap.dedent("""
         import sys
         import robofmu.components
-        from robofmu.system.libcosim import CosimRun
+        from robofmu.system.interop.libcosim import CosimRun
         run = CosimRun(1e-3)
         run.add(sys.argv[1] + "/trajectory.fmu", "trajectory")
         run.step(200)

@@ -253,7 +253,7 @@ def reference_task(robot, step=1e-3):
 
 
 @pytest.mark.parametrize("robot, closed_kind", [
-    ("chess", None), ("rrp", None),                      # their own solvers are closed forms
+    pytest.param("chess", None, marks=pytest.mark.slow), ("rrp", None),   # their own solvers are closed forms
     ("planar2r", "planar_elbow"), ("rrp_offset", "offset_rrp"),   # theirs is Newton-Raphson
 ])
 def test_newton_raphson_agrees_with_the_closed_form_along_the_task(robot, closed_kind):

@@ -1,4 +1,4 @@
-"""Seed 003's tutorial (Newton-Raphson IK) reproduced: system/newton_study.py on
+"""Seed 003's tutorial (Newton-Raphson IK) reproduced: system/studies/newton.py on
 system/studies/seed003_tutorial.toml, against the tutorial's printed values, an independent plain
 Newton iteration, finite differences and sympy."""
 from __future__ import annotations
@@ -11,8 +11,8 @@ import sympy as sp
 
 from robofmu.components.ik import solver_class
 from robofmu.components.robots import load_model
-from robofmu.system import newton_study as ns
-from robofmu.system.tables import STUDIES_DIR
+from robofmu.system.studies import newton as ns
+from robofmu.system.studies.tables import STUDIES_DIR
 
 STUDY = STUDIES_DIR / "seed003_tutorial.toml"
 

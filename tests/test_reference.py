@@ -9,10 +9,11 @@ import pytest
 
 from robofmu.components.ik import make_solver
 from robofmu.components.robots import load_description, load_model
-from robofmu.system.convergence import observed_order, study
+from robofmu.system.studies.convergence import observed_order, study
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
-from robofmu.system.replica import InProcessDiagram, block_identity
+from robofmu.system.fmu import block_identity
+from robofmu.system.studies.replica import InProcessDiagram
 
 EXPERIMENTS = ["chess-pd", "rrp-line", "rpp-bangbang"]
 CHESS_TASK = 13.0
@@ -73,6 +74,8 @@ def test_in_process_replica_equals_the_master_bit_for_bit(fmu_root, name):
 
 
 # -- the reference itself -------------------------------------------------------------------------
+# (chess_pd runs the 13 s chess task once per module, a few seconds: every test using it is slow)
+@pytest.mark.slow
 def test_breakpoints_of_the_chess_task(chess_pd):
     diagram, mono = chess_pd
     breaks = diagram.blocks["trajectory"].breakpoints()
@@ -84,6 +87,7 @@ def test_breakpoints_of_the_chess_task(chess_pd):
     assert diagram.blocks["trajectory"].events() == {"grip closes": GRIP_CLOSE, "grip opens": GRIP_OPEN}
 
 
+@pytest.mark.slow
 def test_perfect_model_from_rest_on_the_trajectory_tracks_it_exactly(chess_pd, rng):
     """Exact model, starting at rest on the trajectory: e'' + kd e' + kp e = 0 from zero initial
     conditions, so q(t) = IK(x_ref(t)) for the whole task, and the torque is the true arm's
@@ -109,6 +113,7 @@ def test_perfect_model_from_rest_on_the_trajectory_tracks_it_exactly(chess_pd, r
     assert tcp_err < 1e-9        # m
 
 
+@pytest.mark.slow
 def test_unknown_pawn_error_only_while_gripped_and_after(chess_unknown_pawn, rng):
     diagram, mono = chess_unknown_pawn
     t = sample_times(diagram.blocks["trajectory"].breakpoints(), CHESS_TASK, rng)
@@ -162,26 +167,29 @@ def test_exact_model_reference_follows_the_joint_reference(fmu_root, name, rng):
 
 
 # -- the co-simulation against it ------------------------------------------------------------------
+@pytest.mark.slow
+@pytest.mark.study
 def test_gauss_seidel_and_jacobi_converge_at_first_order(fmu_root, tmp_path):
     """2 s window, h = 8, 4, 2, 1 ms: the error is O(h) (zero-order hold of the torque, forward
     Euler on the integral, whole-step delays), Jacobi's constant is larger."""
     system = load("chess-pd", fmu_dir=fmu_root)
     res = study(system, (0.008, 0.004, 0.002, 0.001), tmp_path, stop_time=2.0, progress=None)
     for a in ("gauss-seidel", "jacobi"):
-        errs = [r["q_error"] for r in res["rows"] if r["algorithm"] == a]
+        errs = [r.q_error for r in res.runs_of(a)]
         assert all(e1 < e0 for e0, e1 in zip(errs, errs[1:]))
-        assert 0.9 <= res["orders"][a]["q"] <= 1.2, res["table"]
-        assert 0.9 <= res["orders"][a]["tcp"] <= 1.25, res["table"]
-    gs = [r for r in res["rows"] if r["algorithm"] == "gauss-seidel"]
-    jac = [r for r in res["rows"] if r["algorithm"] == "jacobi"]
-    assert all(j["q_error"] > g["q_error"] for g, j in zip(gs, jac))
-    assert gs[-1]["q_error"] < 1.5e-3                       # rad at h = 1 ms
+        assert 0.9 <= res.orders[a].q <= 1.2, res.table
+        assert 0.9 <= res.orders[a].tcp <= 1.25, res.table
+    gs, jac = res.runs_of("gauss-seidel"), res.runs_of("jacobi")
+    assert all(j.q_error > g.q_error for g, j in zip(gs, jac))
+    assert gs[-1].q_error < 1.5e-3                          # rad at h = 1 ms
     saved = json.loads((tmp_path / "convergence.json").read_text())
-    assert saved["orders"]["gauss-seidel"]["q"] == pytest.approx(res["orders"]["gauss-seidel"]["q"])
+    assert saved["orders"]["gauss-seidel"]["q"] == pytest.approx(res.orders["gauss-seidel"].q)
     assert (tmp_path / "convergence.png").stat().st_size > 1000
     assert "| gauss-seidel | 8 |" in (tmp_path / "convergence.md").read_text()
 
 
+@pytest.mark.slow
+@pytest.mark.study
 @pytest.mark.parametrize("name", ["rrp-line", "rpp-bangbang"])
 def test_every_robot_converges_to_its_reference_at_first_order(fmu_root, name):
     """Error <= C h at every step and a least-squares order of about 1. The bang-bang switches
@@ -191,15 +199,17 @@ def test_every_robot_converges_to_its_reference_at_first_order(fmu_root, name):
     system = load(name, fmu_dir=fmu_root)
     steps = (0.01, 0.005, 0.002, 0.001)
     res = study(system, steps, None, algorithms=("gauss-seidel", "in-process"), progress=None)
-    assert 0.9 <= res["orders"]["gauss-seidel"]["q"] <= 1.3, res["table"]
-    rows = {a: [r for r in res["rows"] if r["algorithm"] == a] for a in ("gauss-seidel", "in-process")}
+    assert 0.9 <= res.orders["gauss-seidel"].q <= 1.3, res.table
+    rows = {a: res.runs_of(a) for a in ("gauss-seidel", "in-process")}
     for row, h in zip(rows["gauss-seidel"], steps):
-        assert row["q_error"] <= 0.1 * h, res["table"]          # rad or m; C <= 0.1 per second
-    assert rows["gauss-seidel"][-1]["q_error"] < 1e-4           # within 0.1 mrad / 0.1 mm at 1 ms
+        assert row.q_error <= 0.1 * h, res.table                # rad or m; C <= 0.1 per second
+    assert rows["gauss-seidel"][-1].q_error < 1e-4              # within 0.1 mrad / 0.1 mm at 1 ms
     for gs, replica in zip(rows["gauss-seidel"], rows["in-process"]):
-        assert gs["q_error"] == replica["q_error"]          # the replica is the master, bit for bit
+        assert gs.q_error == replica.q_error                    # the replica is the master, bit for bit
 
 
+@pytest.mark.slow
+@pytest.mark.study
 def test_in_process_loop_converges_at_first_order(chess_pd):
     diagram, mono = chess_pd
     steps = (0.008, 0.004, 0.002, 0.001)

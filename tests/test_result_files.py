@@ -25,6 +25,7 @@ def test_parquet_round_trip_is_exact_with_units_and_info(tmp_path, rng):
         result.write(tmp_path / "r.txt")
 
 
+@pytest.mark.slow
 def test_run_writes_parquet_equal_to_its_csv(fmu_root, tmp_path):
     runs = {}
     for kind in ("csv", "parquet"):

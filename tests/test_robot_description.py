@@ -108,7 +108,7 @@ def test_an_unedited_copy_reads_back_the_same_description(robot, copy_robot):
     assert copy.path == path
     assert copy.urdf == (None if real.urdf is None else path.parent / real.urdf.name)   # None: a closed chain
     for field in ("name", "summary", "blocks", "task", "configurations", "gravity", "gravity_direction",
-                  "payload", "gains", "trajectory", "ik", "mechanism"):
+                  "payload", "gains", "default_gains", "trajectory", "ik", "mechanism"):
         assert getattr(copy, field) == getattr(real, field), field
     assert load_model(copy).n == load_model(real).n
 
@@ -118,7 +118,8 @@ def test_an_unedited_copy_reads_back_the_same_description(robot, copy_robot):
     ("rrp", "name"), ("chess", "name"), ("rrp", "urdf"), ("rrp", "summary"), ("rrp", "blocks"),
     ("rrp", "task"), ("rrp", "task.frame"), ("chess", "task.frame"), ("rrp", "task.coordinates"),
     ("rrp", "configurations"), ("rrp", "configurations.home"), ("rpp", "configurations.home"),
-    ("rrp", "gains"), ("rrp", "gains.pd.kp"), ("rrp", "gains.pd.kd"), ("chess", "payload.mass"),
+    ("rrp", "gains"), ("rrp", "gains.pd.kp"), ("rrp", "gains.pd.kd"), ("rrp", "default_gains"),
+    ("chess", "payload.mass"),
     ("rrp", "trajectory"), ("rrp", "trajectory.profile"), ("rpp", "trajectory.profile"),
     ("rrp", "ik.solver"),
 ])
@@ -159,8 +160,14 @@ def test_gain_set_table_without_any_set_is_refused(copy_robot):
     ("chess", "payload.frame", ["tcp"], "must be a non-empty string"),
     ("rrp", "gains.pd", 400.0, "must be a table, got 400.0"),
     ("rrp", "gains.pd.kp", "400", "must be a finite number, got '400'"),
-    ("rrp", "gains.pd.kd", -40.0, "must be >= 0, got -40.0"),
+    ("rrp", "gains.pd.kd", -40.0, "parameter kd = -40 1/s is invalid: must be > 0"),
     ("chess", "gains.pid.ki", [75.0], "must be a finite number"),
+    # the gains' rule (robofmu.components.control.GAINS): kp > 0, kd > 0, ki >= 0
+    ("rrp", "gains.pd.kp", 0.0, "parameter kp = 0 1/s2 is invalid: must be > 0"),
+    ("rrp", "gains.pd.kd", 0.0, "parameter kd = 0 1/s is invalid: must be > 0"),
+    ("chess", "gains.pid.ki", -75.0, "parameter ki = -75 1/s3 is invalid: must be >= 0"),
+    ("rrp", "default_gains", 1, "must be a non-empty string, got 1"),
+    ("chess", "default_gains", "pdq", "names no gain set of this robot: 'pdq' (its sets: pd, pid)"),
     ("rrp", "trajectory", "line", "must be a table, got 'line'"),
     ("rrp", "trajectory.profile", 1, "must be a non-empty string, got 1"),
     ("rrp", "ik", "spherical", "must be a table, got 'spherical'"),
@@ -382,6 +389,7 @@ def test_every_described_robot_loads(robot):
         assert np.all(np.isfinite(block.values)), kind
     gains = description.gain_set("pd")
     assert gains.as_dict() == {"kp": gains.kp, "kd": gains.kd, "ki": gains.ki}
+    assert description.default_gains in description.gains
     with pytest.raises(ValueError, match="has no gains 'pdq'"):
         description.gain_set("pdq")
     with pytest.raises(ValueError, match="has no configuration 'park'"):

@@ -190,6 +190,7 @@ def test_seed_expressions_equal_the_spec_derivation():
     assert sp.simplify(Gs - sp.Matrix([0, 0, m3 * g])) == sp.zeros(3, 1)
 
 
+@pytest.mark.slow
 def test_seed_energies_follow_from_its_frames_and_pseudo_inertias():
     """T_i = 1/2 tr(W_i J_i W_i^T) with the seed's M0i (eqs. 3, 5, 7) and J_i_i (27)-(29)."""
     import sympy as sp
@@ -340,3 +341,20 @@ def test_ideal_efforts_along_the_bang_bang(pinmodel):
     peak = np.maximum(peak, np.abs(pin.rnea(model, data, q, qd, qdd)))
     assert peak == pytest.approx(PEAK_EFFORTS, rel=1e-9)
 
+
+
+def test_the_urdf_places_the_centres_of_mass_where_the_spec_says(pinmodel):
+    """G1 at R_G1 from the q1 axis, G3 at H_G3 below E: the URDF's inertial origins."""
+    model = pinmodel[0]
+    levers = [np.round(np.abs(model.inertias[j].lever), 12).tolist() for j in range(1, model.njoints)]
+    assert [0.0, R_G1, 0.0] in levers and [0.0, 0.0, H_G3] in levers, levers
+
+
+@pytest.mark.slow
+def test_the_seed_dynamics_table_agrees_with_the_model():
+    """The demo's table: the seed's M, C, G by Lagrange from its energies against the model."""
+    from robofmu.system.studies.tables import STUDIES_DIR, dynamics_table
+
+    table = dynamics_table("rpp", STUDIES_DIR / "seed001_energies.toml")
+    assert table.largest_difference < 1e-9
+    assert "agrees at 50 random configurations" in table.text

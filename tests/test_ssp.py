@@ -55,7 +55,7 @@ from robofmu.components.robots import load_description, load_model
 from robofmu.system import experiment as experiments
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
-from robofmu.system.ssp import (NS, element_names, export_ssp, run_ssp_fmpy, run_ssp_libcosim, ssd_text,
+from robofmu.system.interop.ssp import (NS, element_names, export_ssp, run_ssp_fmpy, run_ssp_libcosim, ssd_text,
                                 ssp_identifier)
 
 STOP = 2.0                  # s: chess: first move (0-1 s), pause, start of the second move
@@ -118,7 +118,6 @@ def runs(systems, packages):
             if tool in ("gs", "jacobi"):
                 cache[name, tool, h] = Master(systems(name)).run(STOP, h, "gauss-seidel" if tool == "gs" else "jacobi")
             elif tool == "libcosim":
-                pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
                 cache[name, tool, h] = run_ssp_libcosim(packages(name), STOP, h)
             else:
                 cache[name, tool, h] = run_ssp_fmpy(packages(name), STOP, h)
@@ -300,7 +299,6 @@ def test_blocks_that_are_no_identifiers_get_component_names_the_runners_use(fmu_
     plant_1 and x2nd_plant (each renamed one with its block's name as description, its .ssv after
     the component), libcosim and fmpy.ssp name their columns after them, and each plant runs
     as the master runs the block: the one given another q0 falls from there."""
-    pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
     from robofmu.system.diagram import BlockSpec, System
 
     q0 = load_model("chess").configuration("home") + np.array([0.0, 0.1, 0.0, 0.0])
@@ -334,7 +332,6 @@ def test_blocks_that_are_no_identifiers_get_component_names_the_runners_use(fmu_
 def test_parameter_bindings_reach_the_fmus(fmu_dir, tmp_path):
     """fmpy.ssp parses the bindings but applies none itself; run_ssp_fmpy applies them. The PID
     gains and a vector parameter (plant q0) must show in both tools' results."""
-    pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
     robot = load_model("chess")
     s = load_description("chess").trajectory.parameters
     r0 = make_solver(robot).position(np.array(s["waypoints"][0]))
@@ -372,7 +369,6 @@ def test_unwired_inputs_keep_their_start_values(fmu_root, tmp_path, robot):
     the source of the input before it (or crash), and set it every step. A lone plant (of every
     robot) keeps its start values (tau = 0, grip false where it has one) in both tools; an SSD
     with a loose input is refused."""
-    pytest.importorskip("libcosimpy", reason="libcosimpy (dev extra) is not installed")
     from robofmu.system.diagram import BlockSpec, System
 
     lone = System([BlockSpec("plant", f"{robot}/plant.fmu")], [], fmu_dir=fmu_root, name="lone-plant",

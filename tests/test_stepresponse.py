@@ -11,23 +11,27 @@ import numpy as np
 import pytest
 
 from robofmu.components.robots import load_description, load_model
+from robofmu.system import defaults
 from robofmu.system import stepresponse as sr
-from robofmu.system.stepresponse import cli, design, experiment, linear, metrics
+from robofmu.system.commands import step as step_command
+from robofmu.system.stepresponse import design, experiment, linear, metrics
 
 PD = dict(kp=400.0, kd=20.0, ki=0.0)
 PID = dict(kp=600.0, kd=25.0, ki=75.0)
-HEIGHT = 0.02        # rad, on every joint
+HEIGHT = 0.02        # rad, the amplitude on every joint
 #: The robots of the acceptance test: every revolute/prismatic mix of the collection.
 ROBOTS = ("chess", "rrp", "rpp")
 
 
 def test_package_reexports_every_public_name():
     for name in sr.__all__:
-        module = next(m for m in (linear, metrics, design, experiment, cli) if hasattr(m, name))
+        module = next(m for m in (linear, metrics, design, experiment) if hasattr(m, name))
         assert getattr(sr, name) is getattr(module, name), name
-    for name in ("design_gains", "compare", "cosimulate_step", "plot_comparison", "add_step_command",
+    for name in ("design_gains", "compare", "cosimulate_step", "plot_comparison", "default_amplitudes",
                  "step_metrics", "predict", "error_dynamics", "discrete_prediction", "write_csv"):
         assert name in sr.__all__
+    # the command is robofmu.system.commands.step: the package exports no command-line things
+    assert not {"add_step_command", "add_parser", "main", "default_robot"} & set(dir(sr))
 
 
 # -- linear models ------------------------------------------------------------------------------------
@@ -65,10 +69,10 @@ def test_zoh_of_continuous_loop_samples_it_exactly_sampled_loop_differs_by_o_h()
 @pytest.mark.parametrize("h", [1e-3, 5e-3])
 @pytest.mark.parametrize("gains", [PD, PID], ids=["pd", "pid"])
 def test_cosimulated_step_matches_sampled_data_prediction(fmu_root, gains, h):
-    result = experiment.cosimulate_step(fmu_root, **gains, robot="chess", step=HEIGHT, h=h,
-                                        t_end=0.8)                                   # the Master
+    result = experiment.cosimulate_step(fmu_root, **gains, robot="chess", amplitude=HEIGHT, h=h,
+                                        stop_time=0.8)                                   # the Master
     c = experiment.compare(result)
-    # every joint, every sample, within 1 % of the step height
+    # every joint, every sample, within 1 % of the amplitude
     assert c.max_deviation("sampled") < 1.0, c.table()
     assert c.best() == "sampled"
     # c2d of the continuous loop is its exact samples: it misses the hold inside the loop
@@ -90,7 +94,8 @@ def test_cosimulated_step_matches_sampled_data_prediction(fmu_root, gains, h):
 
 
 def test_single_joint_step_leaves_the_others_and_derivative_kick_model_is_wrong(fmu_root):
-    result = experiment.cosimulate_step(fmu_root, **PD, robot="chess", step=-0.03, h=2e-3, t_end=0.6, joint=3)
+    result = experiment.cosimulate_step(fmu_root, **PD, robot="chess", amplitude=-0.03, h=2e-3, stop_time=0.6,
+                                        joint=3)
     c = experiment.compare(result)
     assert c.joints == [3] and c.max_deviation("sampled") < 1.0
     assert c.crosstalk_percent < 0.5          # decoupled by the computed-torque law
@@ -141,12 +146,14 @@ def test_step_metrics_closed_form_second_order_with_step_at_t0():
     assert m.steady_state == y0 + amp and m.y0 == y0 and m.t0 == t0
     # rise time 10 -> 90 %: solve the closed form
     from scipy.optimize import brentq
-    s = lambda tt, lvl: 1 - math.exp(-zeta * wn * tt) * (math.cos(wd * tt) + zeta / math.sqrt(1 - zeta**2)
-                                                          * math.sin(wd * tt)) - lvl
+    def s(tt, lvl):
+        return 1 - math.exp(-zeta * wn * tt) * (math.cos(wd * tt) + zeta / math.sqrt(1 - zeta**2)
+                                                * math.sin(wd * tt)) - lvl
     tr = brentq(s, 1e-6, math.pi / wd, args=(0.9,)) - brentq(s, 1e-6, math.pi / wd, args=(0.1,))
     assert m.rise_time == pytest.approx(tr, abs=1e-7)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("zeta", [0.2, 0.45, 0.6901, 0.78, 1.0, 1.7])
 def test_exact_second_order_settling_time(zeta):
     wn = 7.0
@@ -183,8 +190,8 @@ def test_designed_gains_hit_request_in_cosimulation(fmu_root, ts, os_, ki_ratio,
     d = design.design_gains(ts, os_, ki_ratio=ki_ratio, h=h)
     assert d.converged
     hs = 1e-3
-    result = experiment.cosimulate_step(fmu_root, d.kp, d.kd, d.ki, robot="chess", step=HEIGHT, h=hs,
-                                t_end=round(3 * ts / hs) * hs)
+    result = experiment.cosimulate_step(fmu_root, d.kp, d.kd, d.ki, robot="chess", amplitude=HEIGHT, h=hs,
+                                stop_time=round(3 * ts / hs) * hs)
     c = experiment.compare(result)
     for j in c.joints:
         m = c.metrics[f"joint {j}"]
@@ -198,7 +205,7 @@ def test_designed_gains_hit_request_in_cosimulation(fmu_root, ts, os_, ki_ratio,
 def test_step_command(fmu_root, tmp_path, capsys):
     parser = argparse.ArgumentParser(prog="robofmu")
     sub = parser.add_subparsers(dest="command")
-    cli.add_step_command(sub)
+    step_command.add_parser(sub)
     with pytest.raises(SystemExit) as info:
         parser.parse_args(["step", "--help"])
     assert info.value.code == 0
@@ -222,21 +229,21 @@ def robot_gain_sets():
 @pytest.mark.parametrize("robot_name, gain_set", robot_gain_sets())
 def test_every_robot_step_matches_sampled_data_prediction(fmu_root, robot_name, gain_set):
     """Acceptance: from home, the default step on every joint through the controller and plant FMUs
-    (1 ms) is python-control's sampled-data prediction to 1 % of the step height at every sample."""
+    (1 ms) is python-control's sampled-data prediction to 1 % of the amplitude at every sample."""
     model = load_model(robot_name)
     gains = load_description(robot_name).gain_set(gain_set).as_dict()
-    result = experiment.cosimulate_step(fmu_root, **gains, robot=robot_name, h=1e-3, t_end=0.8)
+    result = experiment.cosimulate_step(fmu_root, **gains, robot=robot_name, h=1e-3, stop_time=0.8)
     c = experiment.compare(result)
     assert c.joints == list(range(1, model.n + 1))
     np.testing.assert_allclose(c.q0, model.configuration("home"))
     for j, unit in zip(c.joints, model.joint_units(0)):
         assert c.unit(j) == unit and result.units[f"plant.q[{j}]"] == unit
-        assert abs(c.heights[j - 1]) == experiment.DEFAULT_STEP_HEIGHT[unit]
-    np.testing.assert_array_equal(c.heights, experiment.default_step_heights(robot_name))   # within limits
+        assert abs(c.amplitudes[j - 1]) == experiment.DEFAULT_AMPLITUDE[unit]
+    np.testing.assert_array_equal(c.amplitudes, experiment.default_amplitudes(robot_name))   # within limits
     assert c.effort_units == model.effort_units()
     # the response is a step, not a flat line: it has arrived by the end
-    np.testing.assert_allclose(c.response[-1], c.heights, rtol=0.02)
-    deviation = np.max(np.abs(c.response - c.predictions["sampled"]), axis=0) / np.abs(c.heights) * 100.0
+    np.testing.assert_allclose(c.response[-1], c.amplitudes, rtol=0.02)
+    deviation = np.max(np.abs(c.response - c.predictions["sampled"]), axis=0) / np.abs(c.amplitudes) * 100.0
     np.testing.assert_allclose(deviation, c.deviation["sampled"])
     assert np.all(deviation < 1.0), c.table()
     assert any(model.prismatic) == ("m" in c.joint_units)
@@ -247,15 +254,15 @@ def test_step_setup_defaults_sequences_and_mistakes():
     setup = experiment.step_setup("rrp")
     assert setup.joints == [1, 2, 3] and setup.joint_units == rrp.joint_units(0)
     np.testing.assert_allclose(setup.q0, rrp.configuration("home"))
-    np.testing.assert_allclose(setup.heights, experiment.default_step_heights("rrp"))
-    np.testing.assert_allclose(setup.q_ref, setup.q0 + setup.heights)
-    one = experiment.step_setup("rrp", step=[0.05], joint=[3])          # one height per stepped joint
+    np.testing.assert_allclose(setup.amplitudes, experiment.default_amplitudes("rrp"))
+    np.testing.assert_allclose(setup.q_ref, setup.q0 + setup.amplitudes)
+    one = experiment.step_setup("rrp", amplitude=[0.05], joint=[3])          # one amplitude per stepped joint
     np.testing.assert_allclose(one.q_ref - one.q0, [0.0, 0.0, 0.05])
-    every = experiment.step_setup("rrp", step=[0.01, -0.02, 0.03], joint=2, q0=[0.1, 0.2, 0.1])
+    every = experiment.step_setup("rrp", amplitude=[0.01, -0.02, 0.03], joint=2, q0=[0.1, 0.2, 0.1])
     np.testing.assert_allclose(every.q_ref, [0.1, 0.18, 0.1])
     for kwargs, start in [(dict(joint=4), "joint:"), (dict(joint=[1, 1]), "joint:"),
-                          (dict(q0=[0.0, 0.0]), "q0:"), (dict(step=0.0), "step:"),
-                          (dict(step=[0.1, 0.2]), "step:"), (dict(step=float("nan")), "step:")]:
+                          (dict(q0=[0.0, 0.0]), "q0:"), (dict(amplitude=0.0), "amplitude:"),
+                          (dict(amplitude=[0.1, 0.2]), "amplitude:"), (dict(amplitude=float("nan")), "amplitude:")]:
         with pytest.raises(ValueError) as info:
             experiment.step_setup("rrp", **kwargs)
         assert str(info.value).startswith(start), info.value
@@ -264,7 +271,7 @@ def test_step_setup_defaults_sequences_and_mistakes():
 
 
 def test_comparison_csv_and_figure_carry_the_model_units(fmu_root, tmp_path):
-    result = experiment.cosimulate_step(fmu_root, 400.0, 40.0, robot="rrp", joint=[2, 3], h=5e-3, t_end=0.3)
+    result = experiment.cosimulate_step(fmu_root, 400.0, 40.0, robot="rrp", joint=[2, 3], h=5e-3, stop_time=0.3)
     c = experiment.compare(result)
     assert c.joints == [2, 3] and c.crosstalk_joints == [1] and c.crosstalk.shape == (61, 1)
     assert c.predictions["sampled"].shape == (61, 2) and c.deviation["sampled"].shape == (2,)
@@ -281,7 +288,7 @@ def test_comparison_csv_and_figure_carry_the_model_units(fmu_root, tmp_path):
 def step_parser():
     parser = argparse.ArgumentParser(prog="robofmu")
     sub = parser.add_subparsers(dest="command")
-    cli.add_step_command(sub)
+    step_command.add_parser(sub)
     return parser
 
 
@@ -298,8 +305,8 @@ def run_step(argv, capsys):
 
 
 def test_step_command_prismatic_robot(fmu_root, tmp_path, capsys):
-    status, out, err = run_step(["--robot", "rpp", "--step-size", "0.005", "--t-end", "0.4",
-                                 "--step-height", "0.01", "0.03", "0.03", "--fmus", str(fmu_root),
+    status, out, err = run_step(["--robot", "rpp", "--step-size", "0.005", "--stop-time", "0.4",
+                                 "--amplitude", "0.01", "0.03", "0.03", "--fmus", str(fmu_root),
                                  "--out", str(tmp_path)], capsys)
     assert status == 0, err
     assert "rpp: step q1 +0.01 rad, q2 +0.03 m, q3 +0.03 m" in out and "best match" in out
@@ -312,18 +319,20 @@ def test_step_command_prismatic_robot(fmu_root, tmp_path, capsys):
     (["--robot", "rrp", "--gains", "pid"], "--gains"),
     (["--kp", "-1"], "--kp"),
     (["--kd", "nan"], "--kd"),
+    (["--kd", "0"], "--kd"),                      # the gains' rule: kd > 0
+    (["--gains", "pdq"], "--gains"),
     (["--kp", "abc"], "--kp"),
     (["--settling-time", "0.3"], "--overshoot"),
     (["--settling-time", "0.3", "--overshoot", "120"], "--overshoot"),
     (["--settling-time", "-1", "--overshoot", "5"], "--settling-time"),
     (["--settling-time", "0.3", "--overshoot", "5", "--kp", "100"], "--kp"),
     (["--ki-ratio", "0.01"], "--ki-ratio"),
-    (["--step-height", "0"], "--step-height"),
-    (["--robot", "rrp", "--step-height", "0.1", "0.2"], "--step-height"),
+    (["--amplitude", "0"], "--amplitude"),
+    (["--robot", "rrp", "--amplitude", "0.1", "0.2"], "--amplitude"),
     (["--robot", "rrp", "--joint", "4"], "--joint"),
     (["--robot", "rrp", "--q0", "0", "0"], "--q0"),
     (["--step-size", "0"], "--step-size"),
-    (["--driver", "euler"], "--driver"),
+    (["--algorithm", "euler"], "--algorithm"),
     (["--bogus"], "--bogus"),
     (["--fmus", "/no/such/folder"], "--fmus"),
 ])
@@ -336,8 +345,26 @@ def test_step_command_mistakes_answer_in_one_line(fmu_root, capsys, argv, option
     assert err.startswith("robofmu step: ")
 
 
+def test_step_command_old_spellings_work_and_warn_in_one_line_each(capsys):
+    args = step_parser().parse_args(["step", "--driver", "master", "--t-end", "0.5", "--step-height", "0.01",
+                                     "--height", "0.02", "0.03"])
+    assert (args.algorithm, args.stop_time, args.amplitude) == ("gauss-seidel", 0.5, [0.02, 0.03])
+    assert capsys.readouterr().err.splitlines() == [
+        "robofmu step: --driver is deprecated; use --algorithm", "robofmu step: --t-end is deprecated; use --stop-time",
+        "robofmu step: --step-height is deprecated; use --amplitude",
+        "robofmu step: --height is deprecated; use --amplitude"]
+    assert step_parser().parse_args(["step", "--driver", "jacobi"]).algorithm == "jacobi"
+
+
+def test_step_command_defaults_come_from_the_shared_defaults_and_the_description():
+    args = step_parser().parse_args(["step"])
+    assert (args.step_size, args.algorithm, args.fmus) == (defaults.STEP_SIZE, defaults.ALGORITHM, defaults.FMU_FOLDER)
+    assert args.robot is None and args.gains is None       # main: the first steppable robot, its default_gains
+
+
+@pytest.mark.slow
 def test_demo_cases_one_per_gain_set(fmu_root, tmp_path):
-    cases = experiment.demo_cases("chess", fmu_root, tmp_path, h=5e-3, t_end=0.5)
+    cases = experiment.demo_cases("chess", fmu_root, tmp_path, h=5e-3, stop_time=0.5)
     assert [label.split(":")[0] for label, _ in cases] == list(load_description("chess").gains)
     for label, (c, figure) in cases:
         assert c.max_deviation("sampled") < 1.0 and figure.parent == tmp_path and figure.is_file()

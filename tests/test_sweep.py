@@ -28,7 +28,8 @@ from robofmu.system.sweep.metrics import metrics_of
 CLI = [sys.executable, "-m", "robofmu.system.cli"]
 EXPERIMENT, STOP = "rrp-line", "1"
 GRID = ["--vary", "controller.kp=-1,100,400", "--vary", "controller.kd=20,40"]
-#: controller.kp = -1 is refused by the controller (kp >= 0): those two runs fail.
+#: controller.kp = -1 is refused by the controller (kp > 0: the gains' rule, components/control.py):
+#: those two runs fail.
 GRID_RUNS = [(kp, kd) for kp in (-1.0, 100.0, 400.0) for kd in (20.0, 40.0)]
 
 
@@ -62,7 +63,7 @@ def grid(fmu_root, tmp_path_factory):
     """The 3 x 2 grid on a local cluster of 2 workers, each run's results kept."""
     work = tmp_path_factory.mktemp("sweep")
     out = work / "grid"
-    done = cli("sweep", EXPERIMENT, *GRID, "--stop", STOP, "--workers", 2, "--fmus", fmu_root, "--out", out,
+    done = cli("sweep", EXPERIMENT, *GRID, "--stop-time", STOP, "--workers", 2, "--fmus", fmu_root, "--out", out,
                "--keep-results", cwd=work)
     assert done.returncode == 0, done.stderr
     return work, out, done
@@ -78,7 +79,7 @@ def test_grid_rows_and_failures(grid):
     failed = [r for r in table if r["status"] == "failed"]
     assert [float(r["controller.kp"]) for r in failed] == [-1.0, -1.0]
     for r in failed:                          # the block, the parameter and the rule, on one line
-        assert "controller" in r["message"] and "kp = -1" in r["message"] and ">= 0" in r["message"]
+        assert "controller" in r["message"] and "kp = -1" in r["message"] and "must be > 0" in r["message"]
         assert r["max_tcp_error"] == ""
     ok = [r for r in table if r["status"] == "ok"]
     assert len(ok) == 4 and all(0.0 < float(r["max_tcp_error"]) < 1e-3 for r in ok)
@@ -113,15 +114,15 @@ def test_rows_equal_single_runs_bit_for_bit(grid, fmu_root, kp, kd):
     work, out, _ = grid
     index = GRID_RUNS.index((kp, kd))
     single = work / f"single-{index}"
-    done = cli("run", EXPERIMENT, "--set", f"controller.kp={kp:g}", "--set", f"controller.kd={kd:g}", "--stop", STOP,
-               "--fmus", fmu_root, "--out", single, cwd=work)
+    done = cli("run", EXPERIMENT, "--set", f"controller.kp={kp:g}", "--set", f"controller.kd={kd:g}",
+               "--stop-time", STOP, "--fmus", fmu_root, "--out", single, cwd=work)
     assert done.returncode == 0, done.stderr
     kept = out / "runs" / f"run-{index:05d}" / "results.csv"
     assert kept.read_bytes() == (single / "results.csv").read_bytes()
     system = experiment.load(EXPERIMENT)
     roles = Roles.of(system)
     result = Result.from_csv(single / "results.csv")
-    expected = metrics_of(analysis.tracking(result, roles), result, roles)
+    expected = metrics_of(analysis.tracking_metrics(result, roles), result, roles)
     row = rows(out)[index]
     assert {name: row[name] for name in expected} == {name: cell(value) for name, value in expected.items()}
 
@@ -136,7 +137,7 @@ def test_a_rerun_skips_finished_runs_and_redoes_missing_ones(grid, fmu_root):
         writer.writeheader()
         writer.writerows(table[:3] + table[4:5])
         f.write(",".join(list(table[5].values())[:5]))
-    done = cli("sweep", EXPERIMENT, *GRID, "--stop", STOP, "--workers", 2, "--fmus", fmu_root, "--out", resumed,
+    done = cli("sweep", EXPERIMENT, *GRID, "--stop-time", STOP, "--workers", 2, "--fmus", fmu_root, "--out", resumed,
                cwd=work)
     assert done.returncode == 0, done.stderr
     assert "6 runs (2 now, 4 reused), 2 failed" in done.stdout
@@ -144,9 +145,9 @@ def test_a_rerun_skips_finished_runs_and_redoes_missing_ones(grid, fmu_root):
     original = rows(out)
     for a, b in zip(again, original):          # the runs done again give the same rows exactly
         assert {k: v for k, v in a.items() if k != "wall_time"} == {k: v for k, v in b.items() if k != "wall_time"}
-    same = cli("sweep", EXPERIMENT, *GRID, "--stop", STOP, "--fmus", fmu_root, "--out", resumed, cwd=work)
+    same = cli("sweep", EXPERIMENT, *GRID, "--stop-time", STOP, "--fmus", fmu_root, "--out", resumed, cwd=work)
     assert "6 runs (0 now, 6 reused)" in same.stdout
-    other = cli("sweep", EXPERIMENT, "--vary", "controller.kp=100,200", "--stop", STOP, "--fmus", fmu_root,
+    other = cli("sweep", EXPERIMENT, "--vary", "controller.kp=100,200", "--stop-time", STOP, "--fmus", fmu_root,
                 "--out", resumed, cwd=work)
     assert other.returncode == 2 and other.stderr.count("\n") == 1
     assert "holds another sweep" in other.stderr and "Traceback" not in other.stderr
@@ -190,8 +191,8 @@ def dask_cluster(tmp_path):
 def test_the_same_sweep_on_an_existing_cluster(grid, fmu_root, dask_cluster):
     work, out, _ = grid
     there = work / "on-cluster"
-    done = cli("sweep", EXPERIMENT, "--vary", "controller.kp=100,400", "--vary", "controller.kd=40", "--stop", STOP,
-               "--fmus", fmu_root, "--out", there, "--scheduler", dask_cluster, cwd=work)
+    done = cli("sweep", EXPERIMENT, "--vary", "controller.kp=100,400", "--vary", "controller.kd=40",
+               "--stop-time", STOP, "--fmus", fmu_root, "--out", there, "--scheduler", dask_cluster, cwd=work)
     assert done.returncode == 0, done.stderr
     assert f"the cluster at {dask_cluster}" in done.stderr
     local = {(r["controller.kp"], r["controller.kd"]): r for r in rows(out)}
@@ -214,7 +215,7 @@ def test_a_killed_worker_loses_no_row(grid, fmu_root):
     work, out, _ = grid
     folder = work / "killed"
     sweep = start("sweep", EXPERIMENT, "--vary", "controller.kp=100,200,300,400", "--vary", "controller.kd=20,40",
-                  "--stop", STOP, "--workers", 2, "--fmus", fmu_root, "--out", folder, cwd=work)
+                  "--stop-time", STOP, "--workers", 2, "--fmus", fmu_root, "--out", folder, cwd=work)
     try:
         wait_for_rows(folder, 1, sweep)
         workers = _worker_processes(sweep.pid)
@@ -239,7 +240,7 @@ def test_ctrl_c_keeps_every_finished_row(grid, fmu_root):
     folder = work / "interrupted"
     runs = 24                 # enough that Ctrl-C after the first row lands mid-sweep, however fast a run
     args = ["sweep", EXPERIMENT, "--vary", "controller.kp=100:400:12", "--vary", "controller.kd=20,40",
-            "--stop", STOP, "--workers", 2, "--fmus", fmu_root, "--out", folder]
+            "--stop-time", STOP, "--workers", 2, "--fmus", fmu_root, "--out", folder]
     sweep = start(*args, cwd=work)
     try:
         wait_for_rows(folder, 1, sweep)
@@ -269,7 +270,7 @@ def test_ctrl_c_keeps_every_finished_row(grid, fmu_root):
     (["--vary", "controller.kp=normal(1,-2)", "--samples", "3"], "normal(MEAN,STD): STD > 0"),
     (["--vary", "controller.kp=1,2", "--samples", "3"], "--samples 3: no --vary is a distribution"),
     (["--vary", "controller.kp=1,2", "--workers", "0"], "--workers 0: must be at least 1"),
-    (["--vary", "step=0.0007"], "--vary step=0.0007"),
+    (["--vary", "step_size=0.0007"], "--vary step_size=0.0007"),
     (["--vary", "controller.kp=1,2", "--metric", "speed"], "--metric speed"),
     (["--vary", "controller.kp=1,2", "--scheduler", "tcp://127.0.0.1:9"], "--scheduler tcp://127.0.0.1:9: cannot connect"),
 ])
@@ -302,13 +303,13 @@ def test_random_samples_crossed_with_steps(grid, fmu_root):
     varied communication step; histograms and scatter plots for random designs."""
     work, _, _ = grid
     folder = work / "random"
-    done = cli("sweep", EXPERIMENT, "--vary", "step=0.001,0.002", "--vary", "controller.kp=uniform(100,400)",
-               "--samples", 2, "--seed", 3, "--stop", STOP, "--workers", 2, "--fmus", fmu_root, "--out", folder,
+    done = cli("sweep", EXPERIMENT, "--vary", "step_size=0.001,0.002", "--vary", "controller.kp=uniform(100,400)",
+               "--samples", 2, "--seed", 3, "--stop-time", STOP, "--workers", 2, "--fmus", fmu_root, "--out", folder,
                cwd=work)
     assert done.returncode == 0, done.stderr
     table = rows(folder)
     draws = np.random.default_rng(3).uniform(100, 400, 2)
-    assert [(float(r["step"]), float(r["controller.kp"])) for r in table] == \
+    assert [(float(r["step_size"]), float(r["controller.kp"])) for r in table] == \
         [(h, kp) for h in (0.001, 0.002) for kp in draws]
     assert all(r["status"] == "ok" for r in table)
     # the same gains at a coarser step: a larger tracking error

@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 
 from robofmu.system.analysis import settling_time
-from robofmu.system.sweep.design import Design, DesignError, parse_axis, parse_setting
+from robofmu.system.options import parse_setting
+from robofmu.system.sweep.design import STEP_SIZE_AXIS, Design, DesignError, parse_axis
 from robofmu.system.sweep.journal import Journal, cell, key_of
 
 
 def test_values_lists_ranges_and_distributions():
     assert parse_axis("controller.kp=200,400,800").values == (200.0, 400.0, 800.0)
     assert parse_axis("plant.payload_mass=0:0.3:4").values == tuple(np.linspace(0.0, 0.3, 4))
-    assert parse_axis("step=0.001,0.002").name == "step"
+    assert parse_axis("step_size=0.001,0.002").name == STEP_SIZE_AXIS == "step_size"
     assert parse_axis("controller.kp=uniform(100, 400)").distribution == ("uniform", 100.0, 400.0)
     assert parse_axis("plant.payload_mass=normal(0.03,1e-2)").distribution == ("normal", 0.03, 0.01)
     assert parse_axis("ik.flag=true,false").values == (True, False)
@@ -64,11 +65,31 @@ def test_a_design_survives_its_json():
 def test_design_mistakes():
     with pytest.raises(DesignError, match="varied twice"):
         Design("e", [parse_axis("a.x=1"), parse_axis("a.x=2")])
-    with pytest.raises(DesignError, match="--step: the step is varied"):
-        Design("e", [parse_axis("step=0.001")], step=0.002)
+    with pytest.raises(DesignError, match="--step-size: the step is varied"):
+        Design("e", [parse_axis("step_size=0.001")], step=0.002)
     assert parse_setting("controller.kp=400") == ("controller.kp", 400.0)
-    with pytest.raises(DesignError, match="--set controller.kp=x"):
+    with pytest.raises(ValueError, match="--set controller.kp=x"):
         parse_setting("controller.kp=x")
+
+
+def test_the_old_step_axis_name_still_works_with_a_warning(capsys):
+    axis = parse_axis("step=0.001,0.002")
+    assert axis == parse_axis("step_size=0.001,0.002") and axis.name == "step_size"
+    warnings = capsys.readouterr().err.splitlines()
+    assert warnings == ["robofmu sweep: --vary step=... is deprecated; use step_size=..."]
+
+
+def test_an_earlier_sweep_with_the_old_step_axis_name_is_continued(tmp_path):
+    """sweep.json and sweep.csv written when the axis was named ``step`` are read as step_size."""
+    design = Design("e", [parse_axis("step_size=0.001,0.002"), parse_axis("a.x=1,2")], stop_time=1.0)
+    earlier = design.to_json().replace('"name": "step_size"', '"name": "step"')
+    assert '"name": "step"' in earlier
+    again = Design.from_json(earlier)
+    assert again.same_as(design) and again.names == ["step_size", "a.x"]
+    (tmp_path / "sweep.csv").write_text("step,a.x,m,wall_time,status,message\n0.001,1.0,0.5,1.0,ok,\n")
+    journal = Journal(tmp_path, design.names, ["m"])
+    assert list(journal.rows) == [key_of({"step_size": 0.001, "a.x": 1.0}, design.names)]
+    assert (tmp_path / "sweep.csv").read_text().splitlines()[0] == "step_size,a.x,m,wall_time,status,message"
 
 
 def test_journal_appends_reads_back_and_drops_a_cut_line(tmp_path):
@@ -123,7 +144,7 @@ def test_ctrl_c_during_the_fsync_keeps_the_row_already_visible(tmp_path, monkeyp
     journal = Journal(tmp_path, ["a.x"], ["m"])
     journal.append({"a.x": 0.1, "m": 1.0, "wall_time": 1.0, "status": "ok", "message": ""})
 
-    def interrupted(descriptor):
+    def interrupted(_descriptor):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(module.os, "fsync", interrupted)

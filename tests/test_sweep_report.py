@@ -5,11 +5,11 @@ from __future__ import annotations
 import math
 import pytest
 
-from robofmu.system.sweep.design import STEP, Axis, Design
+from robofmu.system.sweep.design import STEP_SIZE_AXIS, Axis, Design
 from robofmu.system.sweep.figures import comparison_heatmaps, grid_of, sweep_figures
 from robofmu.system.sweep.journal import cell
 from robofmu.system.sweep.report import reproduce_command, write_report
-from robofmu.system.sweep.run import SweepRun
+from robofmu.system.sweep.result import SweepRun
 
 METRICS = ["max_tcp_error", "max_joint_error", "peak_effort", "settling_time"]
 UNITS = {"controller.kp": "N.m/rad", "controller.kd": "N.m.s/rad", "max_tcp_error": "m", "settling_time": "s"}
@@ -93,7 +93,7 @@ def test_grid_report_counts_worst_threshold_failed_and_rerun(tmp_path):
     assert float(first[3]) == pytest.approx(tcp(worst) * 1e3, rel=1e-3)          # shown in mm
     assert len(table_after(text, "## The worst runs by max_tcp_error")) == 5
     assert f"robofmu run tracking --set controller.kp={worst['controller.kp']:.0f} " \
-           f"--set controller.kd={worst['controller.kd']:.0f} --stop 2" in text
+           f"--set controller.kd={worst['controller.kd']:.0f} --stop-time 2" in text
 
     within = [v for v in ok if tcp(v) <= 1e-3]
     assert 0 < len(within) < len(ok)
@@ -103,7 +103,7 @@ def test_grid_report_counts_worst_threshold_failed_and_rerun(tmp_path):
 
     failed_rows = table_after(text, "## Failed runs")
     assert failed_rows == [["2", "200", "40", MESSAGE]]          # run 2: kp first, kd fastest
-    assert "--set controller.kp=200 --set controller.kd=40 --stop 2" in text
+    assert "--set controller.kp=200 --set controller.kd=40 --stop-time 2" in text
 
 
 def test_grid_of_takes_the_worst_over_a_third_axis_and_marks_failed_cells(tmp_path):
@@ -119,14 +119,14 @@ def test_grid_of_takes_the_worst_over_a_third_axis_and_marks_failed_cells(tmp_pa
 
 
 def test_one_axis_gets_metric_against_parameter_and_rerun_with_step(tmp_path):
-    design = Design("tracking", [Axis(STEP, (1e-3, 2e-3, 5e-3, 1e-2))])
-    run = make_run(tmp_path / "step", design, lambda v: 0.2 * v[STEP], lambda v: v[STEP] == 1e-2,
-                   units={**UNITS, STEP: "s"})
+    design = Design("tracking", [Axis(STEP_SIZE_AXIS, (1e-3, 2e-3, 5e-3, 1e-2))])
+    run = make_run(tmp_path / "step", design, lambda v: 0.2 * v[STEP_SIZE_AXIS], lambda v: v[STEP_SIZE_AXIS] == 1e-2,
+                   units={**UNITS, STEP_SIZE_AXIS: "s"})
     text = write_report(run, threshold=5e-4).read_text()
     assert run.figures == [tmp_path / "step" / "metric_vs_parameter.png"] and is_png(run.figures[0])
     assert "2 of 3 ok runs keep max_tcp_error within 0.5 mm." in text
-    assert "robofmu run tracking --step 0.005" in text                    # the worst ok run
-    assert "robofmu run tracking --step 0.01" in text                     # the failed one
+    assert "robofmu run tracking --step-size 0.005" in text               # the worst ok run
+    assert "robofmu run tracking --step-size 0.01" in text                # the failed one
     assert "--set" not in text
 
 

@@ -6,10 +6,10 @@
 from __future__ import annotations
 
 from ..robots import DescriptionError, RobotDescription, load_description, load_model
-from .base import Block, StepRefused, Variable, block_class, registered
+from .base import Block, ContinuousBlock, StepRefused, Variable, block_class, registered
 from . import controller, fk, ik, jacobian, plant, trajectory  # noqa: F401  (register the blocks)
 
-__all__ = ["Block", "StepRefused", "Variable", "block_class", "block_type", "make_block", "registered"]
+__all__ = ["Block", "ContinuousBlock", "StepRefused", "Variable", "block_class", "block_type", "make_block", "registered"]
 
 
 def block_type(description: RobotDescription, kind: str) -> type[Block]:

@@ -11,9 +11,13 @@ depends on) and implements
 - :meth:`Block.advance`: internal state from t to t + h with the inputs held (a refused step
   raises :class:`StepRefused`).
 
-Blocks with continuous state (plant, controller integral) also expose it
-(:meth:`Block.continuous_state`, :meth:`Block.set_continuous_state`, :meth:`Block.derivative`),
-so that a monolithic reference can integrate a whole diagram as one ODE.
+A block is of one of two kinds (as in bdsim): a block with continuous state (plant, controller
+integral) derives from :class:`ContinuousBlock`, which makes it implement
+:meth:`~ContinuousBlock.continuous_state`, :meth:`~ContinuousBlock.set_continuous_state` and
+:meth:`~ContinuousBlock.derivative` (abstract there: a subclass without one of them is refused
+when it is defined, and cannot be instantiated), so that a monolithic reference can integrate a
+whole diagram as one ODE; any other block derives from :class:`Block` and has no continuous
+state (an empty one).
 
 All Real and Boolean values live in one float array :attr:`Block.values`, one slot per declared
 scalar in declaration order (a FMU wrapper uses the slot as value reference); Integer and String
@@ -21,18 +25,19 @@ parameters live in :attr:`Block.settings`. Vector variables are contiguous:
 :meth:`Block.slot` gives the slice.
 
 Subclasses register by ``(kind, variant)`` (a class setting ``abstract = True`` does not): ``Block.__init_subclass__`` rejects a block without a
-kind or summary, or a feedthrough block that does not implement :meth:`output`.
+kind or summary, a kind that robot descriptions do not know (``KNOWN_BLOCKS``, the one list of kinds), a feedthrough block that does not implement :meth:`output`, or one that leaves
+an abstract method (a :class:`ContinuousBlock` without its state hooks) unimplemented.
 """
 from __future__ import annotations
 
-import math
+import abc
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
 import numpy as np
 
 from ..parameters import Parameter, ParameterError, resolve
-from ..robots.description import DescriptionError
+from ..robots.description import KNOWN_BLOCKS, DescriptionError
 from ..robots.model import RobotModel
 
 _REGISTRY: dict[tuple[str, str], type["Block"]] = {}
@@ -82,7 +87,8 @@ def quotient_unit(numerator: str, denominator: str) -> str:
     return "1" if numerator == denominator else f"{numerator}/{denominator}"
 
 
-def _names(base: str, n: int) -> list[str]:
+def vector_names(base: str, n: int) -> list[str]:
+    """``base[1]`` .. ``base[n]``."""
     return [f"{base}[{i}]" for i in range(1, n + 1)]
 
 
@@ -111,6 +117,14 @@ class Block:
             raise TypeError(f"{cls.__name__}: a block needs a `kind` and a `summary`")
         if cls.feedthrough and cls.output is Block.output:
             raise TypeError(f"{cls.__name__}: a direct-feedthrough block must implement output()")
+        missing = sorted(name for name in dir(cls)
+                         if getattr(getattr(cls, name, None), "__isabstractmethod__", False))
+        if missing:
+            raise TypeError(f"{cls.__name__}: a block with continuous state must implement "
+                            f"{', '.join(f'{name}()' for name in missing)}")
+        if cls.kind not in KNOWN_BLOCKS:
+            raise TypeError(f"{cls.__name__}: block kind {cls.kind!r} is not one a robot description may "
+                            f"list ({', '.join(KNOWN_BLOCKS)}: robots/description.py KNOWN_BLOCKS)")
         key = (cls.kind, cls.variant)
         if key in _REGISTRY:
             raise TypeError(f"{cls.__name__}: block {key} is taken by {_REGISTRY[key].__name__}")
@@ -315,17 +329,41 @@ class Block:
     def set_internal_state(self, state: dict) -> None:
         pass
 
-    # -- continuous state (monolithic reference) ---------------------------------------------------
+    # -- continuous state (monolithic reference): none; see ContinuousBlock ------------------------
     def continuous_state(self) -> np.ndarray:
-        """The block's continuous state, shape (s,) (empty for stateless blocks)."""
+        """The block's continuous state: empty (a block with one is a :class:`ContinuousBlock`)."""
         return np.zeros(0)
 
     def set_continuous_state(self, x: np.ndarray) -> None:
         pass
 
     def derivative(self, t: float) -> np.ndarray:
-        """d/dt of :meth:`continuous_state` from the current inputs, shape (s,)."""
+        """d/dt of the (empty) continuous state."""
         return np.zeros(0)
+
+
+class ContinuousBlock(Block, metaclass=abc.ABCMeta):
+    """Base of every block with continuous state x (the plant's joint positions and velocities,
+    the controller's error integral): it says so by deriving from this class, which makes it
+    implement the three hooks a monolithic reference integrates the diagram with (one ODE,
+    ``dx/dt = derivative(t)`` of every such block, the inputs from the other blocks).
+
+    Co-simulated alone, the block still advances x itself (:meth:`Block.advance`).
+    """
+
+    abstract = True
+
+    @abc.abstractmethod
+    def continuous_state(self) -> np.ndarray:
+        """The block's continuous state x, shape (s,) (a copy)."""
+
+    @abc.abstractmethod
+    def set_continuous_state(self, x: np.ndarray) -> None:
+        """Set the continuous state x (shape (s,)), as the integrator of a monolithic reference does."""
+
+    @abc.abstractmethod
+    def derivative(self, t: float) -> np.ndarray:
+        """dx/dt at time ``t`` from x and the current inputs, shape (s,)."""
 
 
 def _tuple(value):
@@ -343,13 +381,3 @@ def block_class(kind: str, variant: str = "") -> type[Block]:
 
 def registered() -> list[tuple[str, str]]:
     return sorted(_REGISTRY)
-
-
-def vector_names(base: str, n: int) -> list[str]:
-    """``base[1]`` .. ``base[n]``."""
-    return _names(base, n)
-
-
-def is_finite(values: np.ndarray) -> bool:
-    """All finite (a sum propagates nan and inf: one pass, no temporary array)."""
-    return math.isfinite(float(np.sum(values)))

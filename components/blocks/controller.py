@@ -1,6 +1,8 @@
 """Controller block: computed torque, tau = M(q)(qdd_ref + kd e' + kp e + ki z) + N(q, qd).
 
-``gain_scale`` multiplies the three gains (a loop-gain knob for sweeps; 1 leaves them as given).
+``gain_scale`` (> 0) multiplies the three gains (a loop-gain knob for sweeps; 1 leaves them as
+given). The gains start at the robot description's ``default_gains`` set and follow the gains'
+rule (:mod:`~robofmu.components.control`: kp > 0, kd > 0, ki >= 0).
 Direct feedthrough: tau is computed from the inputs at the current communication point; the
 integral z = integral of e dt advances with the error held over the step (z += e h). The
 position inputs q_ref and q start at the robot's home configuration (the rest at 0), so a lone
@@ -10,11 +12,11 @@ controller does not know the payload).
 """
 from __future__ import annotations
 
-from ..control import ComputedTorque
-from .base import Block, vector_names
+from ..control import GAINS, ComputedTorque
+from .base import ContinuousBlock, vector_names
 
 
-class ControllerBlock(Block):
+class ControllerBlock(ContinuousBlock):
     kind = "controller"
     feedthrough = True
     summary = "computed-torque PD/PID joint controller (direct feedthrough)"
@@ -22,11 +24,11 @@ class ControllerBlock(Block):
     def declare(self):
         robot, d = self.robot, self.description
         n = robot.n
-        gains = d.gains.get("pd") or next(iter(d.gains.values()))
-        self.real("kp", "parameter", "1/s2", "Proportional gain (every joint)", gains.kp, low=0.0)
-        self.real("kd", "parameter", "1/s", "Derivative gain (every joint)", gains.kd, low=0.0)
-        self.real("ki", "parameter", "1/s3", "Integral gain (every joint); 0 for PD", gains.ki, low=0.0)
-        self.real("gain_scale", "parameter", "1", "Multiplies kp, kd and ki (1: the gains as given)", 1.0, low=0.0)
+        gains = d.gain_set(d.default_gains).as_dict()     # kp, kd, ki bounded by the one rule (control.GAINS)
+        for rule in GAINS:
+            self.real(rule.name, "parameter", rule.unit, rule.description, gains[rule.name], low=rule.low,
+                      above=rule.above)
+        self.real("gain_scale", "parameter", "1", "Multiplies kp, kd and ki (1: the gains as given)", 1.0, above=0.0)
         self.real("g", "parameter", "m/s2", "Gravity in the controller's model", d.gravity, low=0.0)
         self.has_payload = d.payload is not None
         if self.has_payload:

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from ..plant import Plant, PlantDiverged
-from .base import Block, StepRefused, vector_names
+from .base import ContinuousBlock, StepRefused, vector_names
 
 #: The effort unit of a wrench component along / about a task coordinate of this unit.
 _WRENCH_UNITS = {"m": "N", "rad": "N.m"}
@@ -25,7 +25,7 @@ _WRENCH_UNITS = {"m": "N", "rad": "N.m"}
 MAX_SUBSTEPS = 1_000_000
 
 
-class PlantBlock(Block):
+class PlantBlock(ContinuousBlock):
     kind = "plant"
     summary = ("manipulator dynamics M(q)qdd + C(q,qd)qd + g(q) = tau (+ J^T f_ext where the model "
                "takes an end-effector wrench), RK4 with the inputs held over the step; no direct feedthrough")

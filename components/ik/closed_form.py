@@ -92,6 +92,13 @@ class SphericalIK(IKSolver):
         self.d1 = float(robot.fk(np.zeros(3))[2])           # the shoulder: the TCP at s3 = 0
         lower, upper = robot.position_limits()
         self.extension = (max(0.0, float(lower[2])), float(upper[2]))
+        _check_geometry(self, self._fk, ((0.3, -0.7, 0.4), (-2.0, 1.3, 1.7), (1.1, 2.9, 0.9)))
+
+    def _fk(self, q):
+        """The spherical arm's FK: the TCP at s3 along the elevation q2 and the azimuth q1."""
+        q1, q2, s3 = (float(v) for v in q)
+        return np.array([s3 * math.cos(q2) * math.cos(q1), s3 * math.cos(q2) * math.sin(q1),
+                         self.d1 + s3 * math.sin(q2)])
 
     def position(self, x):
         px, py, pz = float(x[0]), float(x[1]), float(x[2]) - self.d1

@@ -11,6 +11,7 @@ Schema (every table but those marked optional is required)::
     summary = "Spherical RRP arm (seed 000)"
     urdf = "rrp.urdf"                    # relative to the TOML
     blocks = ["trajectory", "ik", "controller", "plant", "fk"]
+    default_gains = "pd"                 # the controller's start values: one of the [gains.*] sets
 
     [task]
     frame = "tcp"                        # URDF frame whose position is the task point
@@ -28,8 +29,8 @@ Schema (every table but those marked optional is required)::
     mass = 0.03                          # kg
     frame = "tcp"
 
-    [gains.pd]                           # at least one set; kp, kd, ki in 1/s^2, 1/s, 1/s^3
-    kp = 400.0
+    [gains.pd]                           # at least one set; kp > 0 (1/s^2), kd > 0 (1/s), ki >= 0
+    kp = 400.0                           # (1/s^3, default 0): the gains' rule, control.GAINS
     kd = 40.0
     ki = 0.0
 
@@ -61,6 +62,9 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from ..control import GAINS, check_gains
+from ..parameters import ParameterError
 
 __all__ = ["DescriptionError", "Gains", "TaskSpace", "Payload", "Choice", "Planar3RRPMechanism",
            "MECHANISMS", "RobotDescription", "read"]
@@ -191,7 +195,11 @@ class RobotDescription:
         Unit vector in the world frame.
     payload : Payload or None
     gains : dict of str to Gains
-        The seed's gain sets by name ("pd", "pid").
+        The seed's gain sets by name ("pd", "pid"), each by the gains' rule
+        (:func:`~robofmu.components.control.check_gains`).
+    default_gains : str
+        The gain set the controller block starts with (and ``robofmu step`` uses): a key of
+        ``gains``.
     trajectory : Choice or None
         Reference profile and its parameters (the trajectory block's defaults); None for a robot
         without a trajectory block.
@@ -212,6 +220,7 @@ class RobotDescription:
     gravity_direction: tuple[float, float, float]
     payload: Payload | None
     gains: dict[str, Gains]
+    default_gains: str
     trajectory: Choice | None
     ik: Choice | None
     mechanism: Planar3RRPMechanism | None = None
@@ -374,7 +383,7 @@ def read(path: str | Path) -> RobotDescription:
         raise DescriptionError(path, "(syntax)", str(exc)) from None
     top = _Table(path, data)
     top.unknown({"name", "summary", "urdf", "mechanism", "blocks", "task", "configurations", "gravity",
-                 "payload", "gains", "trajectory", "ik"})
+                 "payload", "gains", "default_gains", "trajectory", "ik"})
     name = top.string("name", _REQUIRED)
     if name != path.stem:
         top.fail("name", f"must be the file's name {path.stem!r}, got {name!r}")
@@ -436,11 +445,18 @@ def read(path: str | Path) -> RobotDescription:
     gains = {}
     for set_name in gains_table.data:
         g = gains_table.table(set_name, _REQUIRED)
-        g.unknown({"kp", "kd", "ki"})
-        gains[set_name] = Gains(g.number("kp", _REQUIRED, low=0.0), g.number("kd", _REQUIRED, low=0.0),
-                                g.number("ki", 0.0, low=0.0))
+        g.unknown({rule.name for rule in GAINS})
+        values = [g.number(rule.name, _REQUIRED if rule.default is None else rule.default) for rule in GAINS]
+        try:
+            gains[set_name] = Gains(*check_gains(*values))
+        except ParameterError as exc:
+            g.fail(exc.name, exc.problem)
     if not gains:
         top.fail("gains", "needs at least one gain set, e.g. [gains.pd]")
+    default_gains = top.string("default_gains", _REQUIRED)
+    if default_gains not in gains:
+        top.fail("default_gains", f"names no gain set of this robot: {default_gains!r} (its sets: "
+                                  f"{', '.join(gains)})")
 
     trajectory_table = top.table("trajectory", _REQUIRED if "trajectory" in blocks else None)
     if trajectory_table is not None and "trajectory" not in blocks:
@@ -454,5 +470,6 @@ def read(path: str | Path) -> RobotDescription:
     return RobotDescription(
         name=name, summary=top.string("summary", _REQUIRED), path=path, urdf=urdf, blocks=blocks,
         task=task_space, configurations=configurations, gravity=magnitude,
-        gravity_direction=direction, payload=payload, gains=gains, trajectory=trajectory, ik=ik,
+        gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
+        trajectory=trajectory, ik=ik,
         mechanism=mechanism)

@@ -1,6 +1,7 @@
 """Step responses of the computed-torque loop of any robot: co-simulation against linear predictions.
 
-A *step experiment* holds a joint reference ``q_ref = q0 + A`` from t = 0 and lets the robot's
+A *step experiment* holds a joint reference ``q_ref = q0 + A`` (A, the amplitude, in each joint's
+unit) from t = 0 and lets the robot's
 controller and plant FMUs respond from rest at ``q0`` (by default its ``home`` configuration).
 With a perfect model every joint is a double integrator closed by the PD/PID law, so the
 response of each joint, revolute (rad) or prismatic (m), is predicted by linear models:
@@ -20,25 +21,26 @@ response of each joint, revolute (rad) or prismatic (m), is predicted by linear 
     :class:`~robofmu.system.master.Master` (:func:`step_system`, :func:`cosimulate_step`), its
     :class:`Comparison` with the predictions (:func:`compare`), CSV and figure
     (:func:`write_csv`, :func:`plot_comparison`); :func:`demo_cases` for the report.
-:mod:`.cli`
-    The ``robofmu step`` command (:func:`add_step_command`).
+
+The ``robofmu step`` command is :mod:`robofmu.system.commands.step`.
 """
 from __future__ import annotations
 
-from .cli import add_step_command, default_robot, main
-from .design import GainDesign, design_gains
-from .experiment import (CONTROLLER, DEFAULT_STEP_HEIGHT, DRIVERS, PLANT, Comparison, StepSetup, compare,
-                         cosimulate_step, default_step_heights, demo_cases, plot_comparison, step_setup,
-                         step_system, write_csv)
-from .linear import MODEL_TEXT, MODELS, discrete_prediction, error_dynamics, predict, zoh_prediction
-from .metrics import StepMetrics, damping_from_overshoot, second_order_settling_time, step_metrics
+from robofmu.system.stepresponse.design import GainDesign, design_gains
+from robofmu.system.stepresponse.experiment import (CONTROLLER, DEFAULT_AMPLITUDE, PLANT, Comparison, StepSetup,
+                                                    compare, cosimulate_step, default_amplitudes, demo_cases,
+                                                    plot_comparison, step_setup, step_system, steppable_robots,
+                                                    write_csv)
+from robofmu.system.stepresponse.linear import (MODEL_TEXT, MODELS, discrete_prediction, error_dynamics, predict,
+                                                zoh_prediction)
+from robofmu.system.stepresponse.metrics import (StepMetrics, damping_from_overshoot, second_order_settling_time,
+                                                 step_metrics)
 
 __all__ = [
     "MODELS", "MODEL_TEXT", "error_dynamics", "zoh_prediction", "discrete_prediction", "predict",
     "StepMetrics", "step_metrics", "damping_from_overshoot", "second_order_settling_time",
     "GainDesign", "design_gains",
-    "CONTROLLER", "PLANT", "DRIVERS", "DEFAULT_STEP_HEIGHT", "StepSetup", "Comparison",
-    "default_step_heights", "step_setup", "step_system", "cosimulate_step", "compare", "write_csv",
+    "CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "steppable_robots",
+    "default_amplitudes", "step_setup", "step_system", "cosimulate_step", "compare", "write_csv",
     "plot_comparison", "demo_cases",
-    "add_step_command", "default_robot", "main",
 ]

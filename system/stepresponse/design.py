@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .linear import check_step, predict
-from .metrics import StepMetrics, damping_from_overshoot, second_order_settling_time, step_metrics
+from robofmu.system.stepresponse.linear import check_step, predict
+from robofmu.system.stepresponse.metrics import StepMetrics, damping_from_overshoot, second_order_settling_time, step_metrics
 
 __all__ = ["GainDesign", "design_gains"]
 

@@ -3,14 +3,15 @@
 The experiment is a two-block diagram built here, whatever the robot: the robot's
 ``controller`` FMU (computed torque) and its ``plant`` FMU (the manipulator dynamics), with
 ``plant.q -> controller.q``, ``plant.qd -> controller.qd`` and ``controller.tau -> plant.tau``.
-The controller's reference inputs stay unconnected: ``q_ref`` starts at ``q0 + A`` (the step,
-from t = 0), ``qd_ref`` and ``qdd_ref`` at 0, a gripper input (where the robot has one) open.
-The plant starts at rest at ``q0``, by default the robot's ``home`` configuration. The master
+The controller's reference inputs stay unconnected: ``q_ref`` starts at ``q0 + A`` (A the
+amplitude, held from t = 0), ``qd_ref`` and ``qdd_ref`` at 0, a gripper input (where the robot
+has one) open. The plant starts at rest at ``q0``, by default the robot's ``home`` configuration. The master
 (:class:`~robofmu.system.master.Master`, Gauss-Seidel by default) runs it; :func:`compare` sets
 the recorded positions against :func:`~.linear.predict` for every model, joint by joint.
 
 Units come from the robot model: a revolute joint's position is in rad and its effort in N.m,
-a prismatic joint's in m and N. Step heights are in each joint's own unit.
+a prismatic joint's in m and N. The size of the reference step, its amplitude, is in each joint's
+own unit ("step" alone is the communication step, ``h``).
 """
 from __future__ import annotations
 
@@ -21,35 +22,40 @@ from typing import Sequence
 
 import numpy as np
 
-from robofmu.components.robots import load_description, load_model
+from robofmu.components.control import check_gains
+from robofmu.components.robots import available, load_description, load_model
 
-from ..diagram import BlockSpec, System
-from ..master import Master, Result
-from .linear import MODEL_TEXT, MODELS, check_gains, check_step, predict
-from .metrics import StepMetrics, step_metrics
+from robofmu.system import defaults
+from robofmu.system.diagram import BlockSpec, System
+from robofmu.system.master import Master, Result
+from robofmu.system.stepresponse.linear import MODEL_TEXT, MODELS, check_step, predict
+from robofmu.system.stepresponse.metrics import StepMetrics, step_metrics
 
-__all__ = ["CONTROLLER", "PLANT", "DRIVERS", "DEFAULT_STEP_HEIGHT", "StepSetup", "Comparison",
-           "default_step_heights", "step_setup", "step_system", "cosimulate_step", "compare",
+__all__ = ["CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "steppable_robots",
+           "default_amplitudes", "step_setup", "step_system", "cosimulate_step", "compare",
            "write_csv", "plot_comparison", "demo_cases"]
 
 #: Instance names of the two blocks of the step diagram (they prefix the recorded columns).
 CONTROLLER = "controller"
 PLANT = "plant"
 
-#: Co-simulation drivers: name -> the master's algorithm.
-DRIVERS = {"master": "gauss-seidel", "jacobi": "jacobi"}
-
-#: Default step height by joint unit: 0.02 rad (about 1.15 degrees) for a revolute joint, 0.02 m
+#: Default amplitude by joint unit: 0.02 rad (about 1.15 degrees) for a revolute joint, 0.02 m
 #: for a prismatic one. No robot description or seed document gives another value. The
-#: predictions are linear in the height and hold the inertia and gravity of the start pose, so
+#: predictions are linear in the amplitude and hold the inertia and gravity of the start pose, so
 #: a small step keeps the configuration-dependent terms small, while the response stays many
 #: orders above the plant's integration error.
-DEFAULT_STEP_HEIGHT = {"rad": 0.02, "m": 0.02}
+DEFAULT_AMPLITUDE = {"rad": 0.02, "m": 0.02}
 
 
-def default_step_heights(robot: str) -> np.ndarray:
-    """The default step height of every joint of ``robot`` (:data:`DEFAULT_STEP_HEIGHT`), signed
-    so that the step from ``home`` stays within the joint's limits (downward where home + height
+def steppable_robots() -> list[str]:
+    """The described robots a step experiment can run on: those with a controller and a plant
+    block, sorted."""
+    return [name for name in available() if {CONTROLLER, PLANT} <= set(load_description(name).blocks)]
+
+
+def default_amplitudes(robot: str) -> np.ndarray:
+    """The default amplitude of every joint of ``robot`` (:data:`DEFAULT_AMPLITUDE`), signed
+    so that the step from ``home`` stays within the joint's limits (downward where home + amplitude
     would pass the upper limit, as the rrp slide's home at its full extension).
 
     Parameters
@@ -63,14 +69,14 @@ def default_step_heights(robot: str) -> np.ndarray:
         In each joint's unit (rad or m).
     """
     model = load_model(robot)
-    return _signed_heights(model, model.configuration("home"))
+    return _signed_amplitudes(model, model.configuration("home"))
 
 
-def _signed_heights(model, start: np.ndarray) -> np.ndarray:
-    """:data:`DEFAULT_STEP_HEIGHT` per joint, negative where ``start`` + height passes the upper limit."""
-    heights = np.array([DEFAULT_STEP_HEIGHT[unit] for unit in model.joint_units(0)])
+def _signed_amplitudes(model, start: np.ndarray) -> np.ndarray:
+    """:data:`DEFAULT_AMPLITUDE` per joint, negative where ``start`` + amplitude passes the upper limit."""
+    amplitudes = np.array([DEFAULT_AMPLITUDE[unit] for unit in model.joint_units(0)])
     _, upper = model.position_limits()
-    return np.where(start + heights > upper, -heights, heights)
+    return np.where(start + amplitudes > upper, -amplitudes, amplitudes)
 
 
 @dataclass(frozen=True)
@@ -84,11 +90,11 @@ class StepSetup:
         Stepped joints, numbered from 1 like the FMU variables.
     q0 : numpy.ndarray, shape (n,)
         Start configuration (joint units), at rest.
-    heights : numpy.ndarray, shape (n,)
-        Step height of every joint (joint units); those of unstepped joints are the scale their
+    amplitudes : numpy.ndarray, shape (n,)
+        Amplitude of every joint (joint units); those of unstepped joints are the scale their
         crosstalk is measured in.
     q_ref : numpy.ndarray, shape (n,)
-        The held reference: ``q0`` plus ``heights`` on the stepped joints.
+        The held reference: ``q0`` plus ``amplitudes`` on the stepped joints.
     joint_units, effort_units, symbols : list of str, length n
         From the robot model: "rad" / "m", "N.m" / "N", "q1", "q2", ...
     """
@@ -96,27 +102,27 @@ class StepSetup:
     robot: str
     joints: list
     q0: np.ndarray
-    heights: np.ndarray
+    amplitudes: np.ndarray
     q_ref: np.ndarray
     joint_units: list
     effort_units: list
     symbols: list
 
 
-def step_setup(robot: str, step: float | Sequence[float] | None = None,
+def step_setup(robot: str, amplitude: float | Sequence[float] | None = None,
                joint: int | Sequence[int] | None = None,
                q0: Sequence[float] | None = None) -> StepSetup:
-    """Resolve the stepped joints, start configuration and heights of a step of ``robot``.
+    """Resolve the stepped joints, start configuration and amplitudes of a step of ``robot``.
 
     Parameters
     ----------
     robot : str
         A described robot with a controller and a plant block.
-    step : float, sequence of float or None
-        Step height (joint units). None: :data:`DEFAULT_STEP_HEIGHT` per joint, downward where
-        it would pass the joint's upper limit. A float: that
-        height on every stepped joint, in each joint's unit. A sequence: one height per joint of
-        the robot (shape (n,)) or one per stepped joint (shape (len(joints),)).
+    amplitude : float, sequence of float or None
+        Size of the reference step (joint units). None: :data:`DEFAULT_AMPLITUDE` per joint,
+        downward where it would pass the joint's upper limit. A float: that amplitude on every
+        stepped joint, in each joint's unit. A sequence: one amplitude per joint of the robot
+        (shape (n,)) or one per stepped joint (shape (len(joints),)).
     joint : int, sequence of int or None
         Stepped joint(s), from 1; None: every joint.
     q0 : sequence of float, shape (n,), optional
@@ -130,7 +136,7 @@ def step_setup(robot: str, step: float | Sequence[float] | None = None,
     ------
     ValueError
         Unknown robot, no controller or plant block, a joint out of range or repeated, a
-        ``q0`` or ``step`` of the wrong length, a non-finite value or a zero height; the
+        ``q0`` or ``amplitude`` of the wrong length, a non-finite value or a zero amplitude; the
         message starts with the argument's name.
     """
     description = load_description(robot)
@@ -155,127 +161,132 @@ def step_setup(robot: str, step: float | Sequence[float] | None = None,
         raise ValueError(f"q0: {robot!r} has {n} joints, got {start.size} values")
     if not np.all(np.isfinite(start)):
         raise ValueError(f"q0: must be finite, got {start.tolist()}")
-    heights = _signed_heights(model, start)
-    if step is not None:
-        values = np.atleast_1d(np.asarray(step, dtype=float)).reshape(-1)
+    amplitudes = _signed_amplitudes(model, start)
+    if amplitude is not None:
+        values = np.atleast_1d(np.asarray(amplitude, dtype=float)).reshape(-1)
         if values.size == 1:
-            heights[:] = values[0]
+            amplitudes[:] = values[0]
         elif values.size == n:
-            heights = values.copy()
+            amplitudes = values.copy()
         elif values.size == len(joints):
-            heights[np.array(joints) - 1] = values
+            amplitudes[np.array(joints) - 1] = values
         else:
             counts = f"{n} (one per joint)" + (f" or {len(joints)} (one per stepped joint)"
                                                  if len(joints) != n else "")
-            raise ValueError(f"step: give one height or {counts}, got {values.size}")
+            raise ValueError(f"amplitude: give one amplitude or {counts}, got {values.size}")
     stepped = np.array(joints) - 1
-    if not np.all(np.isfinite(heights)) or np.any(heights[stepped] == 0.0):
-        raise ValueError(f"step: heights must be finite and not 0, got {heights[stepped].tolist()}")
+    if not np.all(np.isfinite(amplitudes)) or np.any(amplitudes[stepped] == 0.0):
+        raise ValueError(f"amplitude: must be finite and not 0, got {amplitudes[stepped].tolist()}")
     q_ref = start.copy()
-    q_ref[stepped] += heights[stepped]
-    return StepSetup(robot, joints, start, heights, q_ref, model.joint_units(0), model.effort_units(),
+    q_ref[stepped] += amplitudes[stepped]
+    return StepSetup(robot, joints, start, amplitudes, q_ref, model.joint_units(0), model.effort_units(),
                      model.joint_symbols())
 
 
-def _step_text(joints: Sequence[int], heights: Sequence[float], symbols: Sequence[str],
+def _step_text(joints: Sequence[int], amplitudes: Sequence[float], symbols: Sequence[str],
                units: Sequence[str]) -> str:
-    """``q1 +0.02 rad, q3 +0.02 m``: stepped joints (from 1) with their heights (one per stepped
+    """``q1 +0.02 rad, q3 +0.02 m``: stepped joints (from 1) with their amplitudes (one per stepped
     joint) and units (``symbols`` and ``units``: one per joint of the robot)."""
-    return ", ".join(f"{symbols[j - 1]} {a:+g} {units[j - 1]}" for j, a in zip(joints, heights))
+    return ", ".join(f"{symbols[j - 1]} {a:+g} {units[j - 1]}" for j, a in zip(joints, amplitudes))
 
 
-def step_system(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
-                step: float | Sequence[float] | None = None, h: float = 1e-3, t_end: float = 1.0,
-                joint: int | Sequence[int] | None = None,
-                q0: Sequence[float] | None = None) -> System:
+def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
+                amplitude: float | Sequence[float] | None = None, h: float = defaults.STEP_SIZE,
+                stop_time: float = defaults.STOP_TIME, joint: int | Sequence[int] | None = None,
+                q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM) -> System:
     """The step-experiment diagram of ``robot``: controller + plant, q and qd fed back, tau forward.
 
-    The controller's q_ref input (unconnected) starts at q0 + step on the stepped joints;
+    The controller's q_ref input (unconnected) starts at q0 + amplitude on the stepped joints;
     qd_ref, qdd_ref and a gripper input keep their start values 0 / false (the master warns
     that they are unconnected). The controller's model is the plant's (same gravity, no
     payload: the gripper is open).
 
     Parameters
     ----------
-    fmu_root : str or Path
+    fmu_dir : str or Path
         Folder holding ``<robot>/controller.fmu`` and ``<robot>/plant.fmu``.
     kp, kd, ki : float
-        Gains (1/s^2, 1/s, 1/s^3), the same on every joint.
+        Gains (1/s^2, 1/s, 1/s^3), the same on every joint, by the gains' rule
+        (:func:`~robofmu.components.control.check_gains`: ParameterError naming the gain).
     robot : str
         A described robot with a controller and a plant block.
-    step, joint, q0
-        As for :func:`step_setup` (joint units; default heights, every joint, ``home``).
-    h, t_end : float
+    amplitude, joint, q0
+        As for :func:`step_setup` (joint units; default amplitudes, every joint, ``home``).
+    h, stop_time : float
         Communication step and stop time (s).
+    algorithm : one of :data:`~robofmu.system.defaults.ALGORITHMS`
+        The system's master algorithm.
 
     Returns
     -------
     System
-        Named ``<robot>-step``; blocks :data:`CONTROLLER` and :data:`PLANT`.
+        Named ``<robot>-step`` (``extra["robot"]`` the robot); blocks :data:`CONTROLLER` and
+        :data:`PLANT`.
     """
     kp, kd, ki = check_gains(kp, kd, ki)
-    setup = step_setup(robot, step, joint, q0)
+    setup = step_setup(robot, amplitude, joint, q0)
     return System(
         blocks=[BlockSpec(CONTROLLER, f"{robot}/controller.fmu",
                           {"kp": kp, "kd": kd, "ki": ki, "q_ref": setup.q_ref.tolist()}),
                 BlockSpec(PLANT, f"{robot}/plant.fmu", {"q0": setup.q0.tolist()})],
         wires=[f"{PLANT}.q -> {CONTROLLER}.q", f"{PLANT}.qd -> {CONTROLLER}.qd",
                f"{CONTROLLER}.tau -> {PLANT}.tau"],
-        fmu_dir=Path(fmu_root), name=f"{robot}-step", stop_time=float(t_end), step=float(h),
-        description="reference step " + _step_text(setup.joints, setup.heights[np.array(setup.joints) - 1],
+        fmu_dir=Path(fmu_dir), name=f"{robot}-step", stop_time=float(stop_time), step=float(h),
+        algorithm=algorithm, extra={"robot": robot},
+        description="reference step " + _step_text(setup.joints, setup.amplitudes[np.array(setup.joints) - 1],
                                                    setup.symbols, setup.joint_units))
 
 
-def cosimulate_step(fmu_root: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
-                    step: float | Sequence[float] | None = None, h: float = 1e-3, t_end: float = 1.0,
-                    joint: int | Sequence[int] | None = None, q0: Sequence[float] | None = None,
-                    driver: str = "master") -> Result:
+def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
+                    amplitude: float | Sequence[float] | None = None, h: float = defaults.STEP_SIZE,
+                    stop_time: float = defaults.STOP_TIME, joint: int | Sequence[int] | None = None,
+                    q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM) -> Result:
     """Co-simulate a reference step of ``robot``'s computed-torque loop (controller + plant FMUs).
 
     Parameters
     ----------
-    fmu_root : str or Path
+    fmu_dir : str or Path
         Folder holding ``<robot>/{controller,plant}.fmu`` (e.g. ``fmus``).
     kp, kd, ki : float
         Gains (1/s^2, 1/s, 1/s^3).
     robot : str
         A described robot with a controller and a plant block.
-    step : float, sequence of float or None
-        Step height(s) in joint units (see :func:`step_setup`); default
-        :data:`DEFAULT_STEP_HEIGHT` (0.02 rad or 0.02 m per joint).
+    amplitude : float, sequence of float or None
+        Size of the reference step in joint units (see :func:`step_setup`); default
+        :data:`DEFAULT_AMPLITUDE` (0.02 rad or 0.02 m per joint).
     h : float
         Communication step (s).
-    t_end : float
+    stop_time : float
         Stop time (s), a whole number of steps.
     joint : int, sequence of int or None
         Stepped joint(s), from 1; None: every joint.
     q0 : sequence of float, shape (n,), optional
         Start configuration (joint units); default the robot's ``home``.
-    driver : {"master", "jacobi"}
-        :class:`~robofmu.system.master.Master` with Gauss-Seidel ("master") or Jacobi.
+    algorithm : one of :data:`~robofmu.system.defaults.ALGORITHMS`
+        The :class:`~robofmu.system.master.Master`'s algorithm: "gauss-seidel" (default) or "jacobi".
 
     Returns
     -------
     Result
         Recorded ``plant.q[j]``, ``plant.qd[j]`` (rad or m, rad/s or m/s) and
         ``controller.tau[j]`` (N.m or N) at t_k = k h, shape (n_steps + 1,) each, with their
-        units; ``info`` adds ``robot, kp, kd, ki, h, heights (list, n), joints, q0, q_ref
-        (lists, n), joint_units, effort_units, symbols (lists, n), driver, warnings``.
+        units; ``info`` adds ``robot, kp, kd, ki, h, amplitudes (list, n), joints, q0, q_ref
+        (lists, n), joint_units, effort_units, symbols (lists, n), algorithm, warnings``.
     """
     h = check_step(h)
-    if driver not in DRIVERS:
-        raise ValueError(f"driver {driver!r}: choose one of {', '.join(DRIVERS)}")
-    setup = step_setup(robot, step, joint, q0)
-    system = step_system(fmu_root, kp, kd, ki, robot=robot, step=setup.heights, h=h, t_end=t_end,
-                         joint=setup.joints, q0=setup.q0)
+    if algorithm not in defaults.ALGORITHMS:
+        raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(defaults.ALGORITHMS)}")
+    setup = step_setup(robot, amplitude, joint, q0)
+    system = step_system(fmu_dir, kp, kd, ki, robot=robot, amplitude=setup.amplitudes, h=h,
+                         stop_time=stop_time, joint=setup.joints, q0=setup.q0, algorithm=algorithm)
     master = Master(system, record=[f"{PLANT}.q*", f"{CONTROLLER}.tau*"])
     diagram_warnings = master.check()
-    result = master.run(float(t_end), h, DRIVERS[driver])
+    result = master.run(float(stop_time), h, algorithm)
     result.info.update(robot=robot, kp=float(kp), kd=float(kd), ki=float(ki), h=h,
-                       heights=setup.heights.tolist(), joints=list(setup.joints), q0=setup.q0.tolist(),
+                       amplitudes=setup.amplitudes.tolist(), joints=list(setup.joints), q0=setup.q0.tolist(),
                        q_ref=setup.q_ref.tolist(), joint_units=list(setup.joint_units),
                        effort_units=list(setup.effort_units), symbols=list(setup.symbols),
-                       driver=driver, warnings=diagram_warnings)
+                       algorithm=algorithm, warnings=diagram_warnings)
     return result
 
 
@@ -292,8 +303,8 @@ class Comparison:
         Communication points (s).
     joints : list of int, length k
         Stepped joints (from 1).
-    heights : ndarray, shape (k,)
-        Step height of each stepped joint (its unit).
+    amplitudes : ndarray, shape (k,)
+        Amplitude of each stepped joint (its unit).
     response : ndarray, shape (n, k)
         Co-simulated q - q0 of the stepped joints (their units).
     crosstalk_joints : list of int, length n_joints - k
@@ -303,22 +314,23 @@ class Comparison:
     predictions : dict of str -> ndarray, shape (n, k)
         q - q0 predicted by each model in :data:`~.linear.MODELS`, per stepped joint (its unit).
     deviation : dict of str -> ndarray, shape (k,)
-        max over samples of |co-simulated - predicted| in % of |height|, per stepped joint.
+        max over samples of |co-simulated - predicted| in % of |amplitude|, per stepped joint.
     crosstalk_percent : float
-        max over the other joints of max |q - q0| in % of that joint's own step height
-        (``Result.info["heights"]``); 0 if every joint is stepped.
+        max over the other joints of max |q - q0| in % of that joint's own amplitude
+        (``Result.info["amplitudes"]``); 0 if every joint is stepped.
     metrics : dict of str -> StepMetrics
         ``"joint <j>"`` for each stepped joint (absolute positions, its unit, from q0 to
-        q0 + height) and one per model, of the unit step response (from 0 to 1: peak and final
-        values are fractions of the step height; times and percentages are the same as for any
-        height, the models being linear).
+        q0 + amplitude) and one per model, of the unit step response (from 0 to 1: peak and final
+        values are fractions of the amplitude; times and percentages are the same as for any
+        amplitude, the models being linear).
     result : Result
         The co-simulation.
     gains : dict
         kp, kd, ki (1/s^2, 1/s, 1/s^3).
     h : float
         Communication step (s).
-    driver : str
+    algorithm : str
+        The master's algorithm (one of :data:`~robofmu.system.defaults.ALGORITHMS`).
     robot : str
     q0 : list of float, length n_joints
         Start configuration (joint units).
@@ -328,7 +340,7 @@ class Comparison:
 
     time: np.ndarray
     joints: list
-    heights: np.ndarray
+    amplitudes: np.ndarray
     response: np.ndarray
     crosstalk_joints: list
     crosstalk: np.ndarray
@@ -339,7 +351,7 @@ class Comparison:
     result: Result
     gains: dict
     h: float
-    driver: str = "master"
+    algorithm: str = defaults.ALGORITHM
     robot: str = ""
     q0: list = field(default_factory=list)
     joint_units: list = field(default_factory=list)
@@ -363,26 +375,26 @@ class Comparison:
         return min(self.deviation, key=lambda model: float(np.max(self.deviation[model])))
 
     def max_deviation(self, model: str = "sampled") -> float:
-        """max over stepped joints and samples of |co-simulated - predicted|, % of the height."""
+        """max over stepped joints and samples of |co-simulated - predicted|, % of the amplitude."""
         return float(np.max(self.deviation[model]))
 
     def step_text(self) -> str:
-        """``q1 +0.02 rad, q3 +0.02 m``: the stepped joints with their heights and units."""
-        return _step_text(self.joints, self.heights, self.symbols, self.joint_units)
+        """``q1 +0.02 rad, q3 +0.02 m``: the stepped joints with their amplitudes and units."""
+        return _step_text(self.joints, self.amplitudes, self.symbols, self.joint_units)
 
     def table(self) -> str:
         """Metrics of every stepped joint and model, then the deviations, as aligned text."""
         g = self.gains
         start = ", ".join(f"{q:g} {u}" for q, u in zip(self.q0, self.joint_units))
         lines = [f"{self.robot}: step {self.step_text()} from q0 = ({start}); kp {g['kp']:g}, "
-                 f"kd {g['kd']:g}, ki {g['ki']:g}; h {self.h * 1e3:g} ms; driver {self.driver}",
+                 f"kd {g['kd']:g}, ki {g['ki']:g}; h {self.h * 1e3:g} ms; algorithm {self.algorithm}",
                  f"{'response':<24}{'rise (s)':>10}{'settle (s)':>12}{'overshoot %':>13}"
                  f"{'peak time (s)':>15}{'peak':>12}{'final':>12}  unit"]
         for name, m in self.metrics.items():
-            unit = self.unit(int(name.split()[1])) if name.startswith("joint ") else "step height"
+            unit = self.unit(int(name.split()[1])) if name.startswith("joint ") else "amplitude"
             lines.append(f"{name:<24}{m.rise_time:>10.4f}{m.settling_time:>12.4f}{m.overshoot:>13.3f}"
                          f"{m.peak_time:>15.4f}{m.peak:>12.5f}{m.steady_state:>12.5f}  {unit}")
-        lines.append("max |co-simulated - predicted| over all samples, % of the step height:")
+        lines.append("max |co-simulated - predicted| over all samples, % of the amplitude:")
         for model in self.deviation:
             per_joint = ", ".join(f"{self.symbol(j)} {d:.3f}"
                                   for j, d in zip(self.joints, self.deviation[model]))
@@ -390,7 +402,7 @@ class Comparison:
                          f"{MODEL_TEXT[model]}")
         if self.crosstalk.size:
             lines.append(f"  unstepped joints moved by at most {self.crosstalk_percent:.3f} % of their "
-                         "step height")
+                         "amplitude")
         lines.append(f"best match: {self.best()}")
         return "\n".join(lines)
 
@@ -413,7 +425,7 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
     Parameters
     ----------
     result : Result
-        From :func:`cosimulate_step` (its ``info`` carries gains, h, heights, joints, q0, units).
+        From :func:`cosimulate_step` (its ``info`` carries gains, h, amplitudes, joints, q0, units).
     models : sequence of str
         Predictions to compute, from :data:`~.linear.MODELS`.
     settling : float
@@ -424,44 +436,44 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
     Returns
     -------
     Comparison
-        Deviations (max over samples of |co-simulated - predicted|, % of each joint's height)
-        and the metrics of both (steady state taken as the reference q0 + height, which a
+        Deviations (max over samples of |co-simulated - predicted|, % of each joint's amplitude)
+        and the metrics of both (steady state taken as the reference q0 + amplitude, which a
         perfect model reaches; the record may end before the PID's slow integral mode has).
     """
     info = result.info
     kp, kd, ki, h = info["kp"], info["kd"], info["ki"], info["h"]
     joints, q0 = list(info["joints"]), np.asarray(info["q0"], dtype=float)
-    all_heights = np.asarray(info["heights"], dtype=float)
+    all_amplitudes = np.asarray(info["amplitudes"], dtype=float)
     t = result.time
     y = result.vector(f"{PLANT}.q") - q0
     stepped = np.array(joints) - 1
     others = [j for j in range(1, q0.size + 1) if j not in joints]
-    heights = all_heights[stepped]
+    amplitudes = all_amplitudes[stepped]
     response = y[:, stepped]
     crosstalk = y[:, np.array(others, dtype=int) - 1] if others else np.zeros((len(t), 0))
     unit_responses, predictions, deviation = {}, {}, {}
     for model in models:
         unit_responses[model] = predict(kp, kd, ki, t - t[0], 1.0, model, h)
-        predictions[model] = unit_responses[model][:, None] * heights[None, :]
-        deviation[model] = np.max(np.abs(response - predictions[model]), axis=0) / np.abs(heights) * 100.0
+        predictions[model] = unit_responses[model][:, None] * amplitudes[None, :]
+        deviation[model] = np.max(np.abs(response - predictions[model]), axis=0) / np.abs(amplitudes) * 100.0
     metrics: dict[str, StepMetrics] = {}
-    for j, height, column in zip(joints, heights, response.T):
+    for j, amplitude, column in zip(joints, amplitudes, response.T):
         start = q0[j - 1]
-        metrics[f"joint {j}"] = step_metrics(t, column + start, y0=start, yf=start + height,
+        metrics[f"joint {j}"] = step_metrics(t, column + start, y0=start, yf=start + amplitude,
                                              settling=settling, interpolate=interpolate)
     for model, unit_response in unit_responses.items():
         metrics[model] = step_metrics(t, unit_response, y0=0.0, yf=1.0, settling=settling,
                                       interpolate=interpolate)
     crosstalk_percent = 0.0
     if others:
-        scale = np.abs(all_heights[np.array(others) - 1])
+        scale = np.abs(all_amplitudes[np.array(others) - 1])
         crosstalk_percent = float(np.max(np.max(np.abs(crosstalk), axis=0) / scale) * 100.0)
     joint_units, effort_units, symbols = _units_of(result, q0.size)
-    return Comparison(time=t, joints=joints, heights=heights, response=response,
+    return Comparison(time=t, joints=joints, amplitudes=amplitudes, response=response,
                       crosstalk_joints=others, crosstalk=crosstalk, predictions=predictions,
                       deviation=deviation, crosstalk_percent=crosstalk_percent, metrics=metrics,
                       result=result, gains={"kp": kp, "kd": kd, "ki": ki}, h=h,
-                      driver=info.get("driver", "master"), robot=info.get("robot", ""),
+                      algorithm=info.get("algorithm", defaults.ALGORITHM), robot=info.get("robot", ""),
                       q0=q0.tolist(), joint_units=joint_units, effort_units=effort_units,
                       symbols=symbols)
 
@@ -519,8 +531,8 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
     """Figure of the co-simulated step against the continuous, c2d and sampled-data predictions.
 
     One panel of q - q0 per position unit of the stepped joints (rad, m) with the co-simulated
-    responses and the predictions; then co-simulated minus predicted, in % of each joint's step
-    height, with the 1 % band; then one panel of the actuator efforts per effort unit (N.m, N).
+    responses and the predictions; then co-simulated minus predicted, in % of each joint's
+    amplitude, with the 1 % band; then one panel of the actuator efforts per effort unit (N.m, N).
     Labels and units come from the robot model.
 
     Parameters
@@ -529,7 +541,7 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
     out_dir : str or Path
         Folder for the PNG (created).
     name : str, optional
-        File stem; default from robot, gains, step and stepped joints.
+        File stem; default from robot, gains, communication step and stepped joints.
 
     Returns
     -------
@@ -560,32 +572,32 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
     for ax, (unit, joints) in zip(axes, position_groups.items()):
         for j in joints:
             ax.plot(c.time, c.response[:, column[j]], lw=2.5, alpha=0.45,
-                    label=f"co-simulated {c.symbol(j)} ({c.heights[column[j]]:+g} {_display(unit)})")
+                    label=f"co-simulated {c.symbol(j)} ({c.amplitudes[column[j]]:+g} {_display(unit)})")
         for model in c.predictions:
             drawn = set()
             for j in joints:
-                height = float(c.heights[column[j]])
-                if height in drawn:
+                amplitude = float(c.amplitudes[column[j]])
+                if amplitude in drawn:
                     continue
                 ax.plot(c.time, c.predictions[model][:, column[j]], **styles.get(model, {}),
                         label=MODEL_TEXT[model] if not drawn else None)
-                drawn.add(height)
-        for height in {float(c.heights[column[j]]) for j in joints}:
-            ax.axhline(height, color="grey", lw=0.6)
+                drawn.add(amplitude)
+        for amplitude in {float(c.amplitudes[column[j]]) for j in joints}:
+            ax.axhline(amplitude, color="grey", lw=0.6)
         ax.set_ylabel(f"q - q0 ({_display(unit)})")
         ax.legend(fontsize=8)
     deviation_axis = axes[len(position_groups)]
     for model in c.predictions:
         for k, j in enumerate(c.joints):
-            percent = (c.response[:, k] - c.predictions[model][:, k]) / abs(c.heights[k]) * 100.0
+            percent = (c.response[:, k] - c.predictions[model][:, k]) / abs(c.amplitudes[k]) * 100.0
             deviation_axis.plot(c.time, percent, color=styles.get(model, {}).get("color"),
                                 lw=0.9 if model != "continuous" else 0.7,
                                 ls=":" if model == "continuous" else "-", alpha=0.85,
                                 label=f"vs {model} (max {c.max_deviation(model):.2f} %)" if k == 0 else None)
     for sign in (-1.0, 1.0):
         deviation_axis.axhline(sign, color="grey", ls=":", lw=0.8)
-    deviation_axis.plot([], [], color="grey", ls=":", label="1 % of the step")
-    deviation_axis.set_ylabel("co-sim - prediction\n(% of step)")
+    deviation_axis.plot([], [], color="grey", ls=":", label="1 % of the amplitude")
+    deviation_axis.set_ylabel("co-sim - prediction\n(% of amplitude)")
     deviation_axis.legend(fontsize=7, ncol=2)
     effort = c.effort()
     for ax, (unit, joints) in zip(axes[len(position_groups) + 1:], effort_groups.items()):
@@ -594,7 +606,7 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
         ax.set_ylabel(f"effort ({_display(unit)})")
         ax.legend(fontsize=7, ncol=min(4, len(joints)))
     axes[0].set_title(f"{c.robot}: step {c.step_text()}\nkp {g['kp']:.4g}, kd {g['kd']:.4g}, "
-                      f"ki {g['ki']:.4g}; h = {c.h * 1e3:g} ms ({c.driver})", fontsize=10)
+                      f"ki {g['ki']:.4g}; h = {c.h * 1e3:g} ms ({c.algorithm})", fontsize=10)
     axes[-1].set_xlabel("t (s)")
     for ax in axes:
         ax.grid(alpha=0.3)
@@ -605,21 +617,21 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
     return path
 
 
-def demo_cases(robot: str, fmu_root: str | Path, out_dir: str | Path, h: float = 1e-3,
-               t_end: float = 1.0) -> list[tuple[str, tuple[Comparison, Path]]]:
+def demo_cases(robot: str, fmu_dir: str | Path, out_dir: str | Path, h: float = defaults.STEP_SIZE,
+               stop_time: float = defaults.STOP_TIME) -> list[tuple[str, tuple[Comparison, Path]]]:
     """The default step of ``robot`` under each gain set of its description, compared and plotted.
 
-    Every joint steps by its :data:`DEFAULT_STEP_HEIGHT` from the ``home`` configuration.
+    Every joint steps by its :data:`DEFAULT_AMPLITUDE` from the ``home`` configuration.
 
     Parameters
     ----------
     robot : str
         A described robot with a controller and a plant block.
-    fmu_root : str or Path
+    fmu_dir : str or Path
         Folder holding ``<robot>/{controller,plant}.fmu``.
     out_dir : str or Path
         Folder for the figures, ``step_<robot>_<gain set>.png`` (created).
-    h, t_end : float
+    h, stop_time : float
         Communication step and stop time (s).
 
     Returns
@@ -630,8 +642,8 @@ def demo_cases(robot: str, fmu_root: str | Path, out_dir: str | Path, h: float =
     """
     cases = []
     for name, gains in load_description(robot).gains.items():
-        comparison = compare(cosimulate_step(fmu_root, gains.kp, gains.kd, gains.ki, robot=robot, h=h,
-                                             t_end=t_end))
+        comparison = compare(cosimulate_step(fmu_dir, gains.kp, gains.kd, gains.ki, robot=robot, h=h,
+                                             stop_time=stop_time))
         figure = plot_comparison(comparison, out_dir, name=f"step_{robot}_{name}")
         cases.append((f"{name}: kp {gains.kp:g}, kd {gains.kd:g}, ki {gains.ki:g}", (comparison, figure)))
     return cases

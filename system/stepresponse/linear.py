@@ -45,11 +45,14 @@ Sampled-data loop (:func:`discrete_prediction`), what the FMUs implement
     c2d of the continuous loop misses exactly that. What the sampled-data model leaves out is
     the variation of the gravity effort g(q) (and of M(q)) within a step while tau is held:
     the plant feels -M^-1 dg/dq (q - q_k), a perturbation of relative size about
-    (h / 2) ||M^-1 dg/dq|| / kd. It is O(h), does not shrink with the step height, is largest
+    (h / 2) ||M^-1 dg/dq|| / kd. It is O(h), does not shrink with the amplitude, is largest
     on joints whose inertia is small against the slope of their gravity load and absent where
     gravity does not depend on q (a joint about the vertical, a vertical slide); Coriolis
-    terms add errors quadratic in the height. ``tests/test_stepresponse.py`` holds every
-    described robot to 1 % of the step height at every sample for h = 1 ms.
+    terms add errors quadratic in the amplitude. ``tests/test_stepresponse.py`` holds every
+    described robot to 1 % of the amplitude at every sample for h = 1 ms.
+
+The gains follow the project's one rule (:func:`robofmu.components.control.check_gains`:
+kp > 0, kd > 0, ki >= 0); every model below refuses others with a ParameterError naming the gain.
 """
 from __future__ import annotations
 
@@ -58,8 +61,10 @@ import math
 import control
 import numpy as np
 
-__all__ = ["MODELS", "MODEL_TEXT", "check_gains", "check_step", "error_dynamics", "zoh_prediction",
-           "discrete_prediction", "predict"]
+from robofmu.components.control import check_gains
+
+__all__ = ["MODELS", "MODEL_TEXT", "check_step", "error_dynamics", "zoh_prediction", "discrete_prediction",
+           "predict"]
 
 #: Names of the predictions, in the order they are reported.
 MODELS = ("sampled", "zoh", "continuous")
@@ -70,30 +75,6 @@ MODEL_TEXT = {
     "zoh": "c2d(T_cont, h, 'zoh')",
     "continuous": "continuous T_cont(s)",
 }
-
-
-def check_gains(kp: float, kd: float, ki: float) -> tuple[float, float, float]:
-    """The gains as floats; ValueError naming the gain if one is negative, non-finite or kp is 0.
-
-    Parameters
-    ----------
-    kp, kd, ki : float
-        Gains (1/s^2, 1/s, 1/s^3).
-
-    Returns
-    -------
-    (float, float, float)
-        kp, kd, ki.
-    """
-    checked = []
-    for name, value in (("kp", kp), ("kd", kd), ("ki", ki)):
-        value = float(value)
-        if not (math.isfinite(value) and value >= 0.0):
-            raise ValueError(f"{name}: gain must be finite and >= 0, got {value}")
-        checked.append(value)
-    if checked[0] <= 0.0:
-        raise ValueError(f"kp: must be > 0 for a step to settle, got {checked[0]}")
-    return checked[0], checked[1], checked[2]
 
 
 def check_step(h: float) -> float:
@@ -200,7 +181,7 @@ def discrete_prediction(kp: float, kd: float, ki: float, h: float) -> control.St
     return control.ss(a, b, c, np.zeros((1, 1)), dt=h)
 
 
-def predict(kp: float, kd: float, ki: float, t: np.ndarray, height: float = 1.0,
+def predict(kp: float, kd: float, ki: float, t: np.ndarray, amplitude: float = 1.0,
             model: str = "sampled", h: float | None = None) -> np.ndarray:
     """Predicted position change y(t) = q(t) - q0 of a joint after a reference step.
 
@@ -210,8 +191,8 @@ def predict(kp: float, kd: float, ki: float, t: np.ndarray, height: float = 1.0,
         Gains (1/s^2, 1/s, 1/s^3).
     t : array_like, shape (n,)
         Times (s) from the step; for the discrete models multiples of ``h`` (``t[k] = k h``).
-    height : float
-        Step height A (the joint's unit: rad or m).
+    amplitude : float
+        Size A of the reference step (the joint's unit: rad or m).
     model : {"sampled", "zoh", "continuous"}
         :func:`discrete_prediction`, :func:`zoh_prediction` or :func:`error_dynamics`.
     h : float, optional
@@ -220,13 +201,13 @@ def predict(kp: float, kd: float, ki: float, t: np.ndarray, height: float = 1.0,
     Returns
     -------
     numpy.ndarray, shape (n,)
-        y(t) in the unit of ``height`` (``height`` times the unit step response).
+        y(t) in the unit of ``amplitude`` (``amplitude`` times the unit step response).
     """
     t = np.asarray(t, dtype=float)
     if model == "continuous":
         # step_response wants a grid from 0: times are measured from the step
         y = control.step_response(error_dynamics(kp, kd, ki), T=t - t[0]).outputs
-        return height * np.asarray(y, dtype=float).reshape(-1)
+        return amplitude * np.asarray(y, dtype=float).reshape(-1)
     if h is None:
         h = float(t[1] - t[0])
     if model == "sampled":
@@ -236,4 +217,4 @@ def predict(kp: float, kd: float, ki: float, t: np.ndarray, height: float = 1.0,
     else:
         raise ValueError(f"model {model!r}: choose one of {', '.join(MODELS)}")
     y = control.step_response(loop, T=h * np.arange(len(t))).outputs
-    return height * np.asarray(y, dtype=float).reshape(-1)
+    return amplitude * np.asarray(y, dtype=float).reshape(-1)

@@ -5,5 +5,7 @@
 - :mod:`.metrics`: the metrics of a record;
 - :mod:`.engine`: the Dask cluster, submission, retries, progress;
 - :mod:`.journal`: ``sweep.csv`` written as runs finish, and ``sweep.parquet``;
-- :mod:`.run`: the command's checks and flow; :mod:`.figures` and :mod:`.report`.
+- :mod:`.result`: :class:`~.result.SweepRun`, what a sweep gives back;
+- :mod:`.figures` and :mod:`.report`: drawn and written from a SweepRun;
+- :mod:`.run`: the checks and flow of ``robofmu sweep`` (its parser: ``robofmu.system.commands.sweep``).
 """

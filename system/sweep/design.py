@@ -1,6 +1,6 @@
 """What a sweep runs: the varied parameters, their values, and the list of runs.
 
-``--vary BLOCK.PARAM=VALUES`` (or ``step=VALUES`` for the communication step) names an
+``--vary BLOCK.PARAM=VALUES`` (or ``step_size=VALUES`` for the communication step) names an
 :class:`Axis`. VALUES is
 
 - a comma list, ``200,400,800`` (numbers, or ``true`` / ``false``);
@@ -13,21 +13,32 @@ fastest), each crossed with every random sample when there are distributions. Th
 drawn before anything runs, in one fixed order, so the same design always gives the same runs.
 A :class:`Design` is plain data (JSON), written beside the results so that a rerun into the same
 folder can tell whether it continues the same sweep.
+
+The axis of the communication step was named ``step`` before: ``--vary step=VALUES`` still works
+(with a one-line deprecation warning), and an earlier sweep's ``sweep.json`` and ``sweep.csv``
+naming it so are read as ``step_size`` (:data:`RENAMED_AXES`).
 """
 from __future__ import annotations
 
 import itertools
 import json
-import math
 import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["STEP", "Axis", "Design", "DesignError", "parse_axis"]
+from robofmu.system.diagram import parameter_address
+from robofmu.system.options import number
+from robofmu.system.usage import say
+
+__all__ = ["RENAMED_AXES", "STEP_SIZE_AXIS", "Axis", "Design", "DesignError", "parse_axis"]
 
 #: The axis name that varies the communication step (s) rather than a block parameter.
-STEP = "step"
+STEP_SIZE_AXIS = "step_size"
+
+#: Earlier names of axes: still accepted by ``--vary`` (deprecated), and read from an earlier
+#: sweep's ``sweep.json`` and ``sweep.csv`` under the current name.
+RENAMED_AXES = {"step": STEP_SIZE_AXIS}
 
 _NUMBER = r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
 _DISTRIBUTION = re.compile(rf"^\s*(uniform|normal)\s*\({_NUMBER},{_NUMBER}\)\s*$")
@@ -45,7 +56,7 @@ class Axis:
     Attributes
     ----------
     name : str
-        ``BLOCK.PARAM``, or :data:`STEP`.
+        ``BLOCK.PARAM``, or :data:`STEP_SIZE_AXIS`.
     values : tuple
         The grid values (empty for a distribution).
     distribution : tuple or None
@@ -58,13 +69,13 @@ class Axis:
 
     @property
     def block(self) -> str | None:
-        """The instance name (None for the step)."""
-        return None if self.name == STEP else self.name.split(".", 1)[0]
+        """The instance name (None for the step size)."""
+        return None if self.name == STEP_SIZE_AXIS else parameter_address(self.name)[0]
 
     @property
     def parameter(self) -> str | None:
-        """The parameter name (None for the step)."""
-        return None if self.name == STEP else self.name.split(".", 1)[1]
+        """The parameter name (None for the step size)."""
+        return None if self.name == STEP_SIZE_AXIS else parameter_address(self.name)[1]
 
     @property
     def random(self) -> bool:
@@ -82,31 +93,32 @@ def _text(value) -> str:
     return str(value).lower() if isinstance(value, bool) else f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def _number(text: str, option: str):
-    word = text.strip().lower()
-    if word in ("true", "false"):
-        return word == "true"
-    try:
-        value = float(word)
-    except ValueError:
-        raise DesignError(f"{option}: {text.strip()!r} is no number (VALUES: a comma list 200,400,800, "
-                          f"a range START:STOP:COUNT, uniform(LOW,HIGH) or normal(MEAN,STD))") from None
-    if not math.isfinite(value):
-        raise DesignError(f"{option}: {text.strip()!r} is not a finite number")
-    return value
-
-
 def parse_axis(text: str) -> Axis:
-    """The :class:`Axis` of one ``--vary`` value ``BLOCK.PARAM=VALUES`` (DesignError otherwise)."""
-    option = f"--vary {text}"
+    """The :class:`Axis` of one ``--vary`` value ``BLOCK.PARAM=VALUES`` (DesignError otherwise).
+
+    The old name ``step`` of the step size axis gives a :data:`STEP_SIZE_AXIS` axis, with a
+    deprecation warning on stderr.
+    """
+    try:
+        return _axis(text, f"--vary {text}")
+    except ValueError as exc:           # the grammar of a number or of BLOCK.PARAM, shared with --set
+        raise DesignError(str(exc)) from None
+
+
+def _axis(text: str, option: str) -> Axis:
     name, equals, values = text.partition("=")
     name = name.strip()
     if not equals or not values.strip():
-        raise DesignError(f"{option}: expected BLOCK.PARAM=VALUES (e.g. controller.kp=200,400,800) or step=VALUES")
-    if name != STEP:
-        block, dot, parameter = name.partition(".")
-        if not dot or not block or not parameter or not re.fullmatch(r"[A-Za-z_][\w\[\]]*", parameter):
-            raise DesignError(f"{option}: {name!r} is not BLOCK.PARAM (e.g. controller.kp) nor {STEP!r}")
+        raise DesignError(f"{option}: expected BLOCK.PARAM=VALUES (e.g. controller.kp=200,400,800) "
+                          f"or {STEP_SIZE_AXIS}=VALUES")
+    if name in RENAMED_AXES:
+        say("sweep", f"--vary {name}=... is deprecated; use {RENAMED_AXES[name]}=...")
+        name = RENAMED_AXES[name]
+    if name != STEP_SIZE_AXIS:
+        try:
+            parameter_address(name)
+        except ValueError as exc:
+            raise DesignError(f"{option}: {exc} nor {STEP_SIZE_AXIS!r}") from None
     match = _DISTRIBUTION.match(values)
     if match:
         kind, a, b = match.group(1), float(match.group(2)), float(match.group(3))
@@ -119,7 +131,7 @@ def parse_axis(text: str) -> Axis:
         parts = values.split(":")
         if len(parts) != 3:
             raise DesignError(f"{option}: a range is START:STOP:COUNT (e.g. 0:0.3:7)")
-        start, stop = _number(parts[0], option), _number(parts[1], option)
+        start, stop = number(parts[0], option), number(parts[1], option)
         try:
             count = int(parts[2])
         except ValueError:
@@ -128,7 +140,7 @@ def parse_axis(text: str) -> Axis:
             raise DesignError(f"{option}: a range is START:STOP:COUNT with numbers and a whole COUNT >= 2")
         grid = tuple(float(v) for v in np.linspace(start, stop, count))
         return Axis(name, grid)
-    grid = tuple(_number(v, option) for v in values.split(","))
+    grid = tuple(number(v, option) for v in values.split(","))
     if len(set(grid)) != len(grid):
         raise DesignError(f"{option}: a value is given twice")
     return Axis(name, grid)
@@ -148,9 +160,9 @@ class Design:
     seed : int
         Seed of the random samples.
     stop_time : float or None
-        ``--stop`` (s); None: the experiment's.
+        ``--stop-time`` (s); None: the experiment's.
     step : float or None
-        ``--step`` (s) when the step is not an axis; None: the experiment's.
+        The communication step, ``--step-size`` (s), when it is not an axis; None: the experiment's.
     """
 
     experiment: str
@@ -177,8 +189,9 @@ class Design:
                                   "(uniform(LOW,HIGH) or normal(MEAN,STD))")
             if self.samples < 1:
                 raise DesignError(f"--samples {self.samples}: must be at least 1")
-        if self.step is not None and STEP in names:
-            raise DesignError("--step: the step is varied (--vary step=...); give one or the other")
+        if self.step is not None and STEP_SIZE_AXIS in names:
+            raise DesignError(f"--step-size: the step is varied (--vary {STEP_SIZE_AXIS}=...); "
+                              "give one or the other")
 
     @property
     def names(self) -> list[str]:
@@ -223,8 +236,8 @@ class Design:
     @classmethod
     def from_json(cls, text: str) -> "Design":
         data = json.loads(text)
-        axes = [Axis(a["name"], tuple(a["values"]), tuple(a["distribution"]) if a["distribution"] else None)
-                for a in data["axes"]]
+        axes = [Axis(RENAMED_AXES.get(a["name"], a["name"]), tuple(a["values"]),
+                     tuple(a["distribution"]) if a["distribution"] else None) for a in data["axes"]]
         return cls(data["experiment"], axes, data["samples"], data["seed"], data["stop_time"], data["step"])
 
     def same_as(self, other: "Design") -> bool:
@@ -232,12 +245,3 @@ class Design:
         return (self.experiment, self.stop_time, self.step, self.names, self.runs()) == \
             (other.experiment, other.stop_time, other.step, other.names, other.runs())
 
-
-def parse_setting(text: str, option: str = "--set") -> tuple[str, object]:
-    """``BLOCK.PARAM=VALUE`` (one number, or true / false) as ``(name, value)``; DesignError otherwise."""
-    name, equals, value = text.partition("=")
-    name = name.strip()
-    block, dot, parameter = name.partition(".")
-    if not equals or not dot or not block or not parameter or not value.strip():
-        raise DesignError(f"{option} {text}: expected BLOCK.PARAM=VALUE (e.g. controller.kp=400)")
-    return name, _number(value, f"{option} {text}")

@@ -20,7 +20,7 @@ import time
 from contextlib import contextmanager
 from typing import Callable
 
-from ..interrupt import sigint_flag
+from robofmu.system.interrupt import sigint_flag
 
 __all__ = ["PRELOAD", "SweepProgress", "cluster_client", "default_workers", "execute"]
 
@@ -138,7 +138,7 @@ def execute(client, system, runs: list[tuple[int, dict]], stop_time, step, keep_
 def _execute(client, system, runs, stop_time, step, keep_folder, on_record, tag, interrupted) -> None:
     from distributed import as_completed
 
-    from .worker import run_one
+    from robofmu.system.sweep.worker import run_one
 
     futures = {}
     for index, values in runs:

@@ -31,9 +31,9 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator  # noqa: E402
 
-from ..plots import _save  # noqa: E402
-from ..units import printed, small  # noqa: E402
-from .run import SweepRun  # noqa: E402
+from robofmu.system.plots import _save  # noqa: E402
+from robofmu.system.units import printed, small  # noqa: E402
+from robofmu.system.sweep.result import SweepRun  # noqa: E402
 
 __all__ = ["HEADLINE", "column", "comparison_heatmaps", "heatmap", "histograms", "metric_vs_parameter",
            "scatter", "shown", "sweep_figures", "threshold_text"]

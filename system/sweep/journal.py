@@ -16,6 +16,8 @@ import os
 import time
 from pathlib import Path
 
+from robofmu.system.sweep.design import RENAMED_AXES
+
 __all__ = ["Journal", "cell", "key_of"]
 
 #: The columns after the metrics.
@@ -47,8 +49,9 @@ class Journal:
     """``folder/sweep.csv`` with the given columns (the varied names, the metrics, then
     ``wall_time``, ``status``, ``message``).
 
-    An existing file with the same header is continued; one with another header raises
-    ValueError (another sweep was written there).
+    An existing file with the same header is continued (an axis named by its earlier name,
+    :data:`~robofmu.system.sweep.design.RENAMED_AXES`, is read and rewritten under its current
+    one); one with another header raises ValueError (another sweep was written there).
     """
 
     def __init__(self, folder: Path, names: list[str], metrics: list[str]):
@@ -66,7 +69,7 @@ class Journal:
             lines = list(csv.reader(f))
         if not lines:
             return
-        if lines[0] != self.columns:
+        if [RENAMED_AXES.get(c, c) for c in lines[0]] != self.columns:       # an earlier sweep's names too
             raise ValueError(f"{self.path}: its columns are not this sweep's ({', '.join(lines[0][:4])}, ...)")
         for line in lines[1:]:
             if len(line) == len(self.columns) and line[-2] in ("ok", "failed"):

@@ -1,6 +1,6 @@
 """The small record a sweep keeps of one run: its metrics as named numbers.
 
-Every number comes from :func:`robofmu.system.analysis.tracking` (the metrics ``robofmu run``
+Every number comes from :func:`robofmu.system.analysis.tracking_metrics` (the metrics ``robofmu run``
 reports) and :func:`robofmu.system.analysis.settling_time`, so a sweep row equals the analysis
 of a single run with the same parameters bit for bit.
 
@@ -21,9 +21,9 @@ from __future__ import annotations
 
 from robofmu.components.robots import RobotModel
 
-from ..analysis import Tracking, settling_time
-from ..result import Result
-from ..roles import Roles, task_axes
+from robofmu.system.analysis import Tracking, settling_time
+from robofmu.system.result import Result
+from robofmu.system.roles import Roles, task_axes
 
 __all__ = ["METRIC_UNITS", "metric_names", "metrics_of"]
 

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis import markdown_table
-from ..units import printed
-from .design import STEP
-from .figures import HEADLINE, column, shown, sweep_figures, threshold_text
-from .journal import cell, key_of
-from .run import SweepRun
+from robofmu.system.analysis import markdown_table
+from robofmu.system.units import printed
+from robofmu.system.sweep.design import STEP_SIZE_AXIS
+from robofmu.system.sweep.figures import HEADLINE, column, shown, sweep_figures, threshold_text
+from robofmu.system.sweep.journal import cell, key_of
+from robofmu.system.sweep.result import SweepRun
 
 __all__ = ["default_metric", "default_threshold", "reproduce_command", "write_report"]
 
@@ -79,20 +79,21 @@ def reproduce_command(run: SweepRun, row: dict) -> str:
     """The ``robofmu run`` command that runs one row of the sweep alone.
 
     Each varied ``BLOCK.PARAM`` becomes ``--set BLOCK.PARAM=VALUE`` (the value as recorded); a
-    varied step, or the design's fixed step, ``--step``; the design's stop time ``--stop``.
+    varied step size, or the design's fixed step, ``--step-size``; the design's stop time
+    ``--stop-time``.
     """
     design = run.design
     words = ["robofmu", "run", shlex.quote(design.experiment)]
     step = None if design.step is None else cell(design.step)
     for name in design.names:
-        if name == STEP:
+        if name == STEP_SIZE_AXIS:
             step = row[name]
         else:
             words += ["--set", shlex.quote(f"{name}={_exact(row[name])}")]
     if step:
-        words += ["--step", _exact(step)]
+        words += ["--step-size", _exact(step)]
     if design.stop_time is not None:
-        words += ["--stop", _exact(cell(design.stop_time))]
+        words += ["--stop-time", _exact(cell(design.stop_time))]
     return " ".join(words)
 
 

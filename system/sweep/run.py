@@ -1,14 +1,15 @@
 """``robofmu sweep``: many runs of one experiment on Dask, written as they finish, with figures.
 
 Everything that can be checked is checked before a worker starts, and refused in one line
-(:class:`~robofmu.system.runner.UsageError` or the error of the file at fault): the design
+(:class:`~robofmu.system.usage.UsageError` or the error of the file at fault): the design
 (:mod:`~robofmu.system.sweep.design`), the experiment, the FMU folder, each varied block and
 parameter (planned with the first run's values; every value typed against the FMU's variable),
-each varied step (a whole number of steps of the stop time), the output folder.
+each varied step size (the stop time a whole number of its steps), the output folder.
 
-The output folder is kept, not replaced: it holds ``sweep.json`` (the design), ``sweep.csv``
-(one row per finished run, appended as runs finish), and at the end ``sweep.parquet``, the
-figures and ``report.md``. A rerun of the same design into the same folder skips the runs
+The output folder is kept, not replaced: it holds what ``OUTPUTS["sweep"]`` of
+:mod:`robofmu.system.usage` lists, ``sweep.json`` (the design), ``sweep.csv`` (one row per
+finished run, appended as runs finish), and at the end ``sweep.parquet``, the figures and
+``report.md``. A rerun of the same design into the same folder skips the runs
 already recorded (``retry_failed`` runs the failed ones again); a folder holding another sweep,
 or files robofmu did not write, is refused. Ctrl-C stops the sweep: every finished row stays,
 the Parquet file and a report of the finished rows are written, and :class:`SweepInterrupted`
@@ -19,87 +20,36 @@ from __future__ import annotations
 import os
 import time
 from contextlib import ExitStack
-from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import experiment
-from ..check import variable_unit
-from ..diagram import coerce, expand
-from ..master import DiagramError, Master
-from ..runner import UsageError, check_fmu_folder, check_roles, check_times, check_writable, timing
-from .design import STEP, Design
-from .engine import SweepProgress, cluster_client, default_workers, execute
-from .journal import Journal, key_of
-from .metrics import METRIC_UNITS, metric_names
+from robofmu.system import defaults, experiment
+from robofmu.system.check import variable_unit
+from robofmu.system.diagram import coerce, expand
+from robofmu.system.master import DiagramError, Master
+from robofmu.system.roles import check_roles
+from robofmu.system.sweep.design import STEP_SIZE_AXIS, Design
+from robofmu.system.sweep.engine import SweepProgress, cluster_client, default_workers, execute
+from robofmu.system.sweep.journal import Journal, key_of
+from robofmu.system.sweep.metrics import METRIC_UNITS, metric_names
+from robofmu.system.sweep.report import write_report
+from robofmu.system.sweep.result import SweepRun
+from robofmu.system.usage import UsageError, check_fmu_folder, check_times, check_writable, owned_by, timing
 
-__all__ = ["SweepInterrupted", "SweepRun", "run_sweep"]
-
-#: What a sweep folder may hold (anything else: refused, so that no one's files are mixed in).
-OWNED_FILES = ("sweep.json", "sweep.csv", "sweep.csv.tmp", "sweep.parquet", "sweep.parquet.tmp", "report.md")
+__all__ = ["SweepInterrupted", "SweepRun", "check", "run_sweep"]
 
 
 class SweepInterrupted(KeyboardInterrupt):
     """Ctrl-C during a sweep: the message says how many rows were kept and how to continue."""
 
 
-@dataclass
-class SweepRun:
-    """A finished (or interrupted) sweep.
-
-    Attributes
-    ----------
-    design : Design
-    folder : Path
-    rows : list of dict
-        ``sweep.csv``'s rows in run order (text cells, as written).
-    metrics : list of str
-        The metric columns.
-    ran, reused : int
-        Runs executed now, and rows found from an earlier invocation.
-    seconds : float
-        Wall time of the runs executed now (s).
-    workers : int or None
-        Local worker processes (None: an existing cluster).
-    figures : list of Path
-    units : dict
-        Unit of each varied parameter and metric column that has one.
-    """
-
-    design: Design
-    folder: Path
-    rows: list
-    metrics: list
-    ran: int
-    reused: int
-    seconds: float
-    workers: int | None
-    figures: list = field(default_factory=list)
-    units: dict = field(default_factory=dict)
-    name: str = ""
-    description: str = ""
-
-    @property
-    def failed(self) -> list:
-        return [r for r in self.rows if r["status"] != "ok"]
-
-
-def _owned(entry: Path) -> bool:
-    return (entry.is_file() and (entry.name in OWNED_FILES or entry.suffix == ".png")) or \
-        (entry.is_dir() and entry.name == "runs")
-
-
 def _folder(out: Path, design: Design) -> bool:
     """Check the output folder; True if it holds this design's earlier rows."""
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out {out}: exists and is a file, not a folder")
-    if not out.exists():
+    entries = list(out.iterdir()) if out.is_dir() else []
+    if not entries:
         check_writable(out, "--out")
         return False
-    entries = list(out.iterdir())
-    if not entries:
-        return False
     marker = out / "sweep.json"
-    foreign = [e.name for e in entries if not _owned(e)]
+    foreign = [e.name for e in entries if not owned_by("sweep", e)]
     if foreign or not marker.is_file():
         shown = ", ".join(sorted(foreign or [e.name for e in entries])[:3])
         raise UsageError(f"--out {out}: holds {shown}, not a robofmu sweep; give an empty folder, a new one, "
@@ -111,9 +61,8 @@ def _folder(out: Path, design: Design) -> bool:
     if not earlier.same_as(design):
         raise UsageError(f"--out {out}: holds another sweep ({earlier.experiment}: "
                          f"{'; '.join(a.describe() for a in earlier.axes)}); give another folder, or the same "
-                         "experiment and --vary / --samples / --seed / --step / --stop to continue it")
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise UsageError(f"--out {out}: no write permission")
+                         "experiment and --vary / --samples / --seed / --step-size / --stop-time to continue it")
+    check_writable(out, "--out")
     return True
 
 
@@ -123,30 +72,30 @@ def check(design: Design, fmu_dir):
     check_times(design.step, design.stop_time)
     system = experiment.load(design.experiment, fmu_dir=fmu_dir)
     system.fmu_dir = Path(os.path.abspath(system.fmu_dir))
-    steps = next((a.values for a in design.axes if a.name == STEP), ())
-    if any(a.name == STEP and a.random for a in design.axes):
-        raise UsageError("--vary step: the step is varied over a grid only (a comma list or a range)")
+    steps = next((a.values for a in design.axes if a.name == STEP_SIZE_AXIS), ())
+    if any(a.name == STEP_SIZE_AXIS and a.random for a in design.axes):
+        raise UsageError(f"--vary {STEP_SIZE_AXIS}: the step is varied over a grid only (a comma list or a range)")
     for h in steps or [design.step]:
         try:
             timing(system, h, design.stop_time)
         except UsageError as exc:
-            raise UsageError(f"--vary step={h:g}: {exc}" if steps else str(exc)) from None
+            raise UsageError(f"--vary {STEP_SIZE_AXIS}={h:g}: {exc}" if steps else str(exc)) from None
     check_fmu_folder(system)
     names = [b.name for b in system.blocks]
     for axis in design.axes:
-        if axis.name != STEP and axis.block not in names:
+        if axis.name != STEP_SIZE_AXIS and axis.block not in names:
             raise UsageError(f"--vary {axis.name}: no block {axis.block!r} in {system.name} "
                              f"(blocks: {', '.join(names)})")
     runs = design.runs()
-    master = Master(experiment.with_parameters(system, {k: v for k, v in runs[0].items() if k != STEP}))
+    master = Master(experiment.with_parameters(system, {k: v for k, v in runs[0].items() if k != STEP_SIZE_AXIS}))
     try:
         master.check()
     except DiagramError as exc:
         raise DiagramError(f"{system.source or system.name} with --vary", exc.problems) from None
     roles = check_roles(system, master)
-    units, kinds = {STEP: "s"}, {}
+    units, kinds = {STEP_SIZE_AXIS: "s"}, {}
     for axis in design.axes:
-        if axis.name == STEP:
+        if axis.name == STEP_SIZE_AXIS:
             continue
         node = master.nodes[axis.block]
         variables = [node.variables[v] for v in expand(node.variables, axis.parameter)]
@@ -156,7 +105,8 @@ def check(design: Design, fmu_dir):
         if variable_unit(variables[0]):
             units[axis.name] = variable_unit(variables[0])
     try:
-        typed = [{k: (v if k == STEP else coerce(kinds[k], v, f"--vary {k}")) for k, v in run.items()} for run in runs]
+        typed = [{k: (v if k == STEP_SIZE_AXIS else coerce(kinds[k], v, f"--vary {k}")) for k, v in run.items()}
+                 for run in runs]
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     metrics = metric_names(roles, roles.model())
@@ -164,7 +114,7 @@ def check(design: Design, fmu_dir):
     return system, roles, metrics, units, typed
 
 
-def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = "fmus", workers: int | None = None,
+def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = defaults.FMU_FOLDER, workers: int | None = None,
               scheduler: str | None = None, keep_results: bool = False, retry_failed: bool = False,
               progress: bool = True, figures: bool = True, metric: str | None = None,
               threshold: float | None = None) -> SweepRun:
@@ -255,8 +205,6 @@ def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = "fmus", wor
     rows = journal.finish(keys)
     result = SweepRun(design, out, rows, metrics, len(rows) - reused, reused, seconds, count, [], units,
                       system.name, system.description)
-    from .report import write_report
-
     write_report(result, figures=figures and not interrupted, metric=metric, threshold=threshold,
                  interrupted=interrupted)
     if interrupted:

@@ -13,12 +13,12 @@ import threading
 import time
 from pathlib import Path
 
-from .. import analysis
-from ..experiment import with_parameters
-from ..master import Master, SimulationError
-from ..roles import Roles
-from .design import STEP
-from .metrics import metrics_of
+from robofmu.system import analysis
+from robofmu.system.experiment import with_parameters
+from robofmu.system.master import Master, SimulationError
+from robofmu.system.roles import Roles
+from robofmu.system.sweep.design import STEP_SIZE_AXIS
+from robofmu.system.sweep.metrics import metrics_of
 
 __all__ = ["run_one", "simulate"]
 
@@ -28,18 +28,18 @@ _ONE_RUN_AT_A_TIME = threading.Lock()
 def simulate(system, values: dict, stop_time: float | None, step: float | None, everything: bool = False):
     """Run ``system`` with the varied ``values`` set; returns (Result, Roles, Tracking).
 
-    ``values`` maps ``BLOCK.PARAM`` (and :data:`~robofmu.system.sweep.design.STEP`) to a value.
+    ``values`` maps ``BLOCK.PARAM`` (and :data:`~robofmu.system.sweep.design.STEP_SIZE_AXIS`) to a value.
     Only the signals the metrics read (the experiment's roles) are recorded, unless
     ``everything``; the values are the same either way (reading an output changes nothing).
     Raises what :meth:`Master.run` raises (SimulationError with the points recorded so far).
     """
-    step = values.get(STEP, step)
-    configured = with_parameters(system, {k: v for k, v in values.items() if k != STEP})
+    step = values.get(STEP_SIZE_AXIS, step)
+    configured = with_parameters(system, {k: v for k, v in values.items() if k != STEP_SIZE_AXIS})
     roles = Roles.of(configured)
     master = Master(configured, record=None if everything else roles.signals())
     master.check()
     result = master.run(stop_time=stop_time, step=step)
-    return result, roles, analysis.tracking(result, roles)
+    return result, roles, analysis.tracking_metrics(result, roles)
 
 
 def run_one(system, values: dict, stop_time: float | None, step: float | None,
@@ -53,7 +53,7 @@ def run_one(system, values: dict, stop_time: float | None, step: float | None,
     values : dict
         The varied quantities of this run.
     stop_time, step : float or None
-        Timing (s); None: the experiment's (a varied step takes precedence).
+        Timing (s); None: the experiment's (a varied step size takes precedence).
     keep : str, optional
         A folder to write this run's ``results.csv`` in (also the points before a failure).
     """

@@ -1,0 +1,52 @@
+"""``robofmu run``: one experiment, its results, figures and report."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from robofmu.system import options
+from robofmu.system.usage import default_out, stopped
+
+HELP = "run a named co-simulation experiment"
+
+
+def add_parser(subparsers):
+    from robofmu.system.experiment import available
+
+    p = subparsers.add_parser(
+        "run", help=HELP,
+        description="Run a co-simulation experiment and write DIR/results.csv (time, then one column per "
+                    "signal 'instance.variable'), figures and report.md. DIR is replaced whole at the end of "
+                    "the run (written in a temporary sibling folder, then swapped in), so no earlier output "
+                    "stays beside new results; a folder holding other files than a run's outputs is refused. "
+                    "Ctrl-C stops at the next communication point and writes the results so far (exit status "
+                    "130). An experiment file may name a packaged experiment as its base. "
+                    f"Experiments: {', '.join(available())}.")
+    p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
+    options.add_out(p, "output folder, replaced whole (default: results/EXPERIMENT)")
+    options.add_step_size(p)
+    options.add_stop_time(p)
+    options.add_algorithm(p)
+    options.add_fmus(p)
+    p.add_argument("--set", action="append", metavar=options.PARAMETER_SETTING,
+                   help="set a block parameter over the experiment's (repeatable), e.g. controller.kp=400")
+    p.add_argument("--format", choices=["csv", "parquet"], default="csv",
+                   help="results.csv (default) or results.parquet: binary, exact, with units; for large runs")
+    p.set_defaults(func=main)
+    return p
+
+
+def main(args) -> int:
+    from robofmu.system.master import SimulationError
+    from robofmu.system.run import run_experiment
+
+    out = Path(args.out) if args.out else default_out(args.experiment)
+    try:
+        parameters = dict(options.parse_setting(text) for text in args.set or [])
+        run = run_experiment(args.experiment, out, fmu_dir=args.fmus, step=args.step_size,
+                             stop_time=args.stop_time, algorithm=args.algorithm, parameters=parameters,
+                             results_format=args.format)
+    except (SimulationError, ValueError) as exc:      # ValueError: UsageError, ExperimentError, DiagramError
+        return stopped("run", exc)
+    print(run.section)
+    print(f"\nwrote {out / ('results.' + args.format)}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
+    return 0

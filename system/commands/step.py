@@ -1,0 +1,229 @@
+"""``robofmu step``: co-simulate a joint reference step of a robot and compare it with the predictions.
+
+A mistake on the command line is answered in one line naming the option, with exit status 2
+(argparse's own messages included); a co-simulation that fails, in one line with status 1;
+Ctrl-C with 130 (:func:`~robofmu.system.usage.stopped`).
+
+"Step" alone is the communication step (``--step-size``); the size of the reference step is its
+amplitude (``--amplitude``). Older spellings still work and warn in one line: ``--t-end``
+(``--stop-time``), ``--driver master|jacobi`` (``--algorithm gauss-seidel|jacobi``),
+``--step-height`` / ``--height`` (``--amplitude``).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from robofmu.system import defaults, options
+from robofmu.system.usage import UsageError, check_fmu_folder, check_times, check_writable, say, stopped
+
+HELP = "co-simulate a joint reference step and compare it with linear predictions"
+
+#: ``--driver`` (deprecated) values as ``--algorithm`` values.
+_DRIVER_ALGORITHMS = {"master": "gauss-seidel", "jacobi": "jacobi"}
+
+
+class _Driver(options.deprecated_alias("--algorithm")):
+    """``--driver master|jacobi``: the old spelling of ``--algorithm`` (master is gauss-seidel)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        super().__call__(parser, namespace, _DRIVER_ALGORITHMS[values], option_string)
+
+
+def _answer_in_one_line(parser: argparse.ArgumentParser) -> None:
+    """Make ``parser`` report argparse's own mistakes (bad values, unknown options) in one line,
+    exit status 2."""
+    def error(message: str):
+        parser.exit(2, f"{parser.prog}: {message}\n")
+
+    parse_known_args = parser.parse_known_args
+
+    def parse_known_args_strictly(args=None, namespace=None):
+        namespace, extras = parse_known_args(args, namespace)
+        if extras:
+            error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
+
+    parser.error = error
+    parser.parse_known_args = parse_known_args_strictly
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``robofmu step``; returns its parser (python-control is imported by :func:`main`)."""
+    p = subparsers.add_parser(
+        "step", help=HELP,
+        description="Co-simulate a reference step of a robot's computed-torque loop (its controller "
+                    "and plant FMUs), starting at rest at its home configuration; print rise/settling "
+                    "time, overshoot and peak of the co-simulated response and of three linear "
+                    "predictions (continuous error dynamics, its c2d ZOH discretization, the "
+                    "sampled-data loop), and their max deviation in % of the amplitude. Gains: a "
+                    "gain set of the robot's description (--gains), explicit values (--kp/--kd/--ki: "
+                    "kp > 0, kd > 0, ki >= 0), or designed from --settling-time and --overshoot.")
+    p.add_argument("--robot", metavar="NAME",
+                   help="a described robot with a controller and a plant block (default: the first of them "
+                        "by name)")
+    p.add_argument("--gains", metavar="SET",
+                   help="a gain set of the robot's description, [gains.SET] (default: its default_gains)")
+    p.add_argument("--kp", type=float, help="proportional gain (1/s^2, > 0), overrides the set's")
+    p.add_argument("--kd", type=float, help="derivative gain (1/s, > 0), overrides the set's")
+    p.add_argument("--ki", type=float, help="integral gain (1/s^3, >= 0), overrides the set's")
+    p.add_argument("--settling-time", type=float, metavar="T", help="design gains: 2%% settling time (s)")
+    p.add_argument("--overshoot", type=float, metavar="P", help="design gains: overshoot (%%)")
+    p.add_argument("--ki-ratio", type=float, metavar="R",
+                   help="design a PID: integral pole at R zeta wn (e.g. 0.01); default PD")
+    p.add_argument("--design-for-step", action="store_true",
+                   help="refine the design on the sampled-data loop at --step-size")
+    options.add_step_size(p, default=defaults.STEP_SIZE)
+    p.add_argument("--amplitude", type=float, nargs="+", metavar="A",
+                   help="size of the reference step in joint units (rad or m): one for every stepped joint, "
+                        "one per joint, or one per stepped joint (default: the step experiment's "
+                        "DEFAULT_AMPLITUDE per joint unit, downward where it would pass the joint's upper limit)")
+    for old in ("--step-height", "--height"):
+        p.add_argument(old, dest="amplitude", type=float, nargs="+", metavar="A",
+                       action=options.deprecated_alias("--amplitude"), help=argparse.SUPPRESS)
+    p.add_argument("--joint", type=int, nargs="+", metavar="J", help="step these joints only (from 1; "
+                                                                     "default: all)")
+    p.add_argument("--q0", type=float, nargs="+", metavar="Q",
+                   help="start configuration, joint units (default: the robot's home configuration)")
+    options.add_stop_time(p, what=f"{defaults.STOP_TIME:g}, or 3 x --settling-time", old=("--t-end",))
+    options.add_algorithm(p, default=defaults.ALGORITHM)
+    p.add_argument("--driver", dest="algorithm", choices=tuple(_DRIVER_ALGORITHMS), action=_Driver,
+                   help=argparse.SUPPRESS)
+    options.add_fmus(p)
+    options.add_out(p, "write the CSVs and the figure into this folder (created; other files in it stay)")
+    p.set_defaults(func=main)
+    _answer_in_one_line(p)
+    return p
+
+
+def _positive(option: str, value: float | None) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0.0):
+        raise UsageError(f"{option}: must be > 0, got {value:g}")
+
+
+def _design(args):
+    """The gain design ``--settling-time`` and ``--overshoot`` ask for, or None; UsageError naming
+    the option."""
+    from robofmu.system.stepresponse import design_gains
+
+    explicit = [option for option, value in (("--kp", args.kp), ("--kd", args.kd), ("--ki", args.ki),
+                                             ("--gains", args.gains)) if value is not None]
+    if args.settling_time is None and args.overshoot is None:
+        for option, value in (("--ki-ratio", args.ki_ratio), ("--design-for-step", args.design_for_step or None)):
+            if value is not None:
+                raise UsageError(f"{option}: needs --settling-time and --overshoot")
+        return None
+    if args.settling_time is None or args.overshoot is None:
+        missing = "--overshoot" if args.settling_time is not None else "--settling-time"
+        raise UsageError(f"{missing}: missing: --settling-time and --overshoot go together")
+    if explicit:
+        raise UsageError(f"{explicit[0]}: the gains are designed from --settling-time and --overshoot; "
+                         "give one or the other")
+    _positive("--settling-time", args.settling_time)
+    if not (math.isfinite(args.overshoot) and 0.0 <= args.overshoot < 100.0):
+        raise UsageError(f"--overshoot: must be in [0, 100) %, got {args.overshoot:g}")
+    _positive("--ki-ratio", args.ki_ratio)
+    try:
+        return design_gains(args.settling_time, args.overshoot, ki_ratio=args.ki_ratio,
+                            h=args.step_size if args.design_for_step else None)
+    except ValueError as exc:
+        raise UsageError(f"--settling-time: {exc}") from None
+
+
+def _gains(args, robot: str, design) -> tuple[float, float, float]:
+    """kp, kd, ki: designed, else the robot's gain set (``--gains``, default its ``default_gains``)
+    with ``--kp`` / ``--kd`` / ``--ki`` over it, by the gains' rule (UsageError naming the option)."""
+    from robofmu.components.control import check_gains
+    from robofmu.components.parameters import ParameterError
+    from robofmu.components.robots import load_description
+
+    if design is not None:
+        return design.kp, design.kd, design.ki
+    description = load_description(robot)
+    try:
+        seed = description.gain_set(description.default_gains if args.gains is None else args.gains)
+    except ValueError as exc:
+        raise UsageError(f"--gains: {exc}") from None
+    gains = {name: getattr(seed, name) if given is None else given
+             for name, given in (("kp", args.kp), ("kd", args.kd), ("ki", args.ki))}
+    try:
+        return check_gains(**gains)
+    except ParameterError as exc:      # naming the gain
+        raise UsageError(f"--{exc.name}: {exc.problem}") from None
+
+
+def _robot(args) -> str:
+    """``--robot``, default the first robot a step experiment can run on; UsageError naming it."""
+    from robofmu.components.robots import available
+    from robofmu.system.stepresponse import steppable_robots
+
+    robots = steppable_robots()
+    if args.robot is None:
+        if not robots:
+            raise UsageError("--robot: no described robot has a controller and a plant block")
+        return robots[0]
+    if args.robot not in available():
+        raise UsageError(f"--robot: unknown robot {args.robot!r}; known robots: {', '.join(available())}")
+    if args.robot not in robots:
+        raise UsageError(f"--robot: robot {args.robot!r} has no controller and plant blocks; robots that "
+                         f"have: {', '.join(robots)}")
+    return args.robot
+
+
+def main(args) -> int:
+    from robofmu.system.master import SimulationError
+    from robofmu.system.stepresponse import compare, cosimulate_step, plot_comparison, step_setup, step_system, \
+        write_csv
+
+    try:
+        robot = _robot(args)
+        check_times(args.step_size, args.stop_time)
+        try:
+            setup = step_setup(robot, args.amplitude, args.joint, args.q0)
+        except ValueError as exc:
+            argument, _, message = str(exc).partition(": ")
+            option = {"amplitude": "--amplitude", "joint": "--joint", "q0": "--q0"}.get(argument)
+            raise UsageError(f"{option}: {message}" if option else f"--robot: {exc}") from None
+        design = _design(args)
+        kp, kd, ki = _gains(args, robot, design)
+        stop_time = args.stop_time
+        if stop_time is None:
+            stop_time = max(defaults.STOP_TIME, 3.0 * args.settling_time) if design else defaults.STOP_TIME
+        stop_time = max(1, round(stop_time / args.step_size)) * args.step_size
+        check_fmu_folder(step_system(args.fmus, kp, kd, ki, robot=robot, amplitude=setup.amplitudes,
+                                     h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0))
+        if args.out is not None:
+            check_writable(args.out, "--out")
+        result = cosimulate_step(Path(args.fmus), kp, kd, ki, robot=robot, amplitude=setup.amplitudes,
+                                 h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0,
+                                 algorithm=args.algorithm)
+    except (SimulationError, ValueError) as exc:     # ValueError: UsageError, DiagramError
+        return stopped("step", exc)
+    comparison = compare(result)
+    if design is not None:
+        print(f"design: settling time {design.settling_time:g} s, overshoot {design.overshoot:g} % -> "
+              f"zeta {design.zeta:.4f}, wn {design.wn:.4f} rad/s (rule of thumb 4/(zeta Ts): "
+              f"{design.rule_of_thumb_wn:.4f}); kp {kp:.6g}, kd {kd:.6g}, ki {ki:.6g}"
+              + (f"; refined for h = {design.h:g} s" if design.h else ""))
+    print(comparison.table())
+    if design is not None:
+        for j in comparison.joints:
+            m = comparison.metrics[f"joint {j}"]
+            overshoot_error = (f"{(m.overshoot / design.overshoot - 1) * 100:+.2f} %" if design.overshoot
+                               else "requested 0")
+            print(f"achieved, joint {j}: settling {m.settling_time:.4f} s "
+                  f"({(m.settling_time / design.settling_time - 1) * 100:+.2f} %), overshoot "
+                  f"{m.overshoot:.3f} % ({overshoot_error})")
+    if args.out:
+        out = Path(args.out)
+        stem = f"step_h{args.step_size * 1e3:g}ms"
+        try:
+            result.to_csv(out / f"{stem}_cosim.csv")
+            write_csv(comparison, out / f"{stem}_compare.csv")
+            figure = plot_comparison(comparison, out, stem)
+        except OSError as exc:
+            say("step", f"cannot write {out}: {exc.strerror or exc}")
+            return 1
+        print(f"wrote {out / (stem + '_cosim.csv')}, {out / (stem + '_compare.csv')}, {figure}")
+    return 0

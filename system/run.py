@@ -27,7 +27,7 @@ from robofmu.system import analysis, experiment
 from robofmu.system.diagram import System
 from robofmu.system.master import DiagramError, Interrupted, Master, Result, SimulationError
 from robofmu.system.roles import Roles, check_roles
-from robofmu.system.usage import OutputFolder, UsageError, check_fmu_folder, check_times, timing
+from robofmu.system.usage import OutputFolder, UsageError, check_fmu_folder, check_times, times_given, timing
 
 __all__ = ["Run", "figures_of", "progress_printer", "run_experiment"]
 
@@ -88,9 +88,8 @@ def _check_memory(system: System, master: Master, n: int, step: float | None, st
     """Refuse (UsageError) a run whose recording would not fit in memory (:meth:`Master.memory_problem`)."""
     problem = master.memory_problem(n)
     if problem:
-        given = ", ".join(f"{option} {value:g}" for option, value in (("--step-size", step), ("--stop-time", stop_time))
-                          if value is not None) or str(system.source or system.name)
-        raise UsageError(f"{given}: {problem}; use a larger --step-size or a shorter --stop-time")
+        raise UsageError(f"{times_given(system, step, stop_time)}: {problem}; use a larger --step-size or a "
+                         "shorter --stop-time")
 
 
 def _short_report(name: str, text: str) -> str:

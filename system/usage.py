@@ -30,7 +30,7 @@ from robofmu.system.check import step_count
 from robofmu.system.diagram import System
 
 __all__ = ["OUTPUTS", "OutputFolder", "Outputs", "UsageError", "check_fmu_folder", "check_times", "check_writable",
-           "default_out", "export_experiment", "one_line", "owned_by", "say", "stopped", "timing"]
+           "default_out", "export_experiment", "one_line", "owned_by", "say", "stopped", "times_given", "timing"]
 
 
 @dataclass(frozen=True)
@@ -245,6 +245,13 @@ def check_fmu_folder(system: System, option: str = "--fmus") -> None:
                          f"one runs; rebuild: {build}")
 
 
+def times_given(system: System, step: float | None, stop_time: float | None) -> str:
+    """What a message about the run's length names: the options given (``--step-size 0.001,
+    --stop-time 40``), else the experiment file."""
+    return ", ".join(f"{option} {value:g}" for option, value in (("--step-size", step), ("--stop-time", stop_time))
+                     if value is not None) or str(system.source or system.name)
+
+
 def timing(system: System, step: float | None, stop_time: float | None) -> tuple[float, float, int]:
     """The step, stop time and number of steps of the run, checked (UsageError naming --step-size /
     --stop-time or the file)."""
@@ -254,8 +261,7 @@ def timing(system: System, step: float | None, stop_time: float | None) -> tuple
     stop = system.stop_time if stop_time is None else float(stop_time)
     stop_text = f"--stop-time {stop:g} s" if stop_time is not None else f"the stop time {stop:g} s (stop_time in {source})"
     step_text = f"--step-size {h:g} s" if step is not None else f"{h:g} s (the step in {source}; or give --step-size)"
-    given = ", ".join(f"{option} {value:g}" for option, value in (("--step-size", step), ("--stop-time", stop_time))
-                      if value is not None) or str(source)
+    given = times_given(system, step, stop_time)
     ratio = stop / h
     if not ratio <= 1e15:
         raise UsageError(f"{given}: {ratio:.3g} steps, far more than memory can record; use a larger --step-size "

@@ -450,3 +450,48 @@ def test_prismatic_joints_have_si_units(robot, prismatic):
     for j, p in enumerate(prismatic, start=1):
         assert controller[f"qdd_ref[{j}]"] == ("m/s2" if p else "rad/s2")
         assert controller[f"tau[{j}]"] == ("N" if p else "N.m")
+
+
+# -- URDFs from the wild: what the model refuses at load (and so at build), naming joint or link ---------
+def _edited_rrp(copy_robot, old: str, new: str):
+    path = copy_robot("rrp")
+    urdf = path.parent / "rrp.urdf"
+    text = urdf.read_text()
+    assert old in text
+    urdf.write_text(text.replace(old, new, 1))
+    return read(path)
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ('<joint name="joint2" type="revolute">', '<joint name="joint2" type="continuous">',
+     r"rrp.urdf: joint 'joint2' is continuous \(Pinocchio's q = \(cos, sin\)\); robofmu supports revolute and "
+     r"prismatic joints"),
+    ('<mass value="0.5"/>', '<mass value="0.0"/>',
+     r"rrp.urdf: link 'link2' \(moved by joint 'joint2'\) has no mass \(0 kg\): give it an <inertial> with mass > 0"),
+    ('<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/>',
+     '<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.003"/>',
+     r"rrp.urdf: link 'link2' \(moved by joint 'joint2'\) has an inertia no body has \(principal moments 0.001, "
+     r"0.001, 0.003 kg m\^2: each must be >= 0 and at most the sum of the other two\)"),
+    ('<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/>',
+     '<inertia ixx="-0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/>',
+     r"rrp.urdf: link 'link2' \(moved by joint 'joint2'\) has an inertia no body has \(principal moments -0.001, "),
+])
+def test_a_urdf_the_dynamics_cannot_use_is_refused_naming_joint_or_link(copy_robot, old, new, message):
+    description = _edited_rrp(copy_robot, old, new)
+    with pytest.raises(ValueError, match=message):
+        load_model(description)
+
+
+def test_a_link_without_an_inertial_is_refused_naming_it(copy_robot):
+    """No <inertial> at all: Pinocchio gives the link zero mass (M(q) singular at t = 0)."""
+    description = _edited_rrp(copy_robot, '''<inertial>
+      <origin xyz="0 0 0" rpy="0 0 0"/>
+      <mass value="0.5"/>''', '''<inertial_removed>
+      <origin xyz="0 0 0" rpy="0 0 0"/>
+      <mass value="0.5"/>''')
+    urdf = description.urdf
+    text = urdf.read_text()
+    start = text.index("<inertial_removed>")
+    urdf.write_text(text[:start] + text[text.index("</inertial>", start) + len("</inertial>"):])
+    with pytest.raises(ValueError, match=r"link 'link2' \(moved by joint 'joint2'\) has no mass \(0 kg\)"):
+        load_model(description)

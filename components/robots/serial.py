@@ -5,11 +5,21 @@ Task coordinates are the chosen world axes of the task frame's position (m).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
 from .description import RobotDescription
 from .model import RobotModel, derivative_unit
+
+
+_CONTINUOUS = "continuous (Pinocchio's q = (cos, sin))"
+#: What a joint that robofmu does not take is, by a word of Pinocchio's joint model name
+#: (``JointModelRUBZ``, ``JointModelRevoluteUnboundedUnaligned``, ``JointModelSpherical``, ...).
+_JOINT_KINDS = {"RUB": _CONTINUOUS, "Unbounded": _CONTINUOUS, "Spherical": "spherical", "FreeFlyer": "floating",
+                "Planar": "planar", "Translation": "a translation", "Composite": "composite",
+                "Mimic": "a mimic joint"}
 
 
 class SerialRobot(RobotModel):
@@ -30,9 +40,7 @@ class SerialRobot(RobotModel):
         self.description = description
         self.model = pin.buildModelFromUrdf(str(description.urdf))
         self.data = self.model.createData()
-        name = description.name
-        if self.model.nq != self.model.nv:
-            raise ValueError(f"{name}: only revolute and prismatic joints are supported")
+        self._check_joints_and_links()
         self.n = self.model.nv
         if len(description.configuration("home")) != self.n:
             raise ValueError(f"{description.path}: configurations.home: needs {self.n} joint values "
@@ -55,6 +63,33 @@ class SerialRobot(RobotModel):
         self.joint_names = [self.model.names[j] for j in range(1, self.model.njoints)]
         self.prismatic = [self.model.joints[j].shortname().startswith("JointModelP")
                           for j in range(1, self.model.njoints)]
+
+    def _check_joints_and_links(self) -> None:
+        """Refuse, naming the joint or link, what the run would otherwise discover at t = 0: a joint
+        that is not revolute or prismatic (a continuous joint is q = (cos, sin) in Pinocchio), and a
+        moving link without a valid inertia (no mass, or a rotational inertia that no body has:
+        not symmetric positive semi-definite, or breaking the triangle inequality), which makes
+        M(q) singular."""
+        model, urdf = self.model, self.description.urdf.name
+        for j in range(1, model.njoints):
+            joint, kind = model.names[j], model.joints[j].shortname()
+            if not kind.startswith(("JointModelR", "JointModelP")) or model.joints[j].nq != 1:
+                what = next((text for word, text in _JOINT_KINDS.items() if word in kind), kind)
+                raise ValueError(f"{urdf}: joint {joint!r} is {what}; robofmu "
+                                 "supports revolute and prismatic joints")
+            link = next(f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == j)
+            inertia = model.inertias[j]
+            rotational = np.asarray(inertia.inertia)
+            eigenvalues = np.linalg.eigvalsh(rotational) if np.all(np.isfinite(rotational)) else np.full(3, np.nan)
+            tolerance = 1e-12 * max(1.0, float(np.max(np.abs(rotational))))
+            if not (math.isfinite(inertia.mass) and inertia.mass > 0.0):
+                raise ValueError(f"{urdf}: link {link!r} (moved by joint {joint!r}) has no mass "
+                                 f"({inertia.mass:g} kg): give it an <inertial> with mass > 0")
+            if not (np.allclose(rotational, rotational.T, atol=tolerance) and eigenvalues.min() >= -tolerance
+                    and 2.0 * eigenvalues.max() <= eigenvalues.sum() + tolerance):
+                raise ValueError(f"{urdf}: link {link!r} (moved by joint {joint!r}) has an inertia no body has "
+                                 f"(principal moments {', '.join(f'{v:g}' for v in eigenvalues)} kg m^2: each "
+                                 "must be >= 0 and at most the sum of the other two)")
 
     def _frame(self, frame: str, key: str) -> int:
         fid = self.model.getFrameId(frame)

@@ -14,7 +14,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet -e '.[dev,arms]'
 	touch $(STAMP)
 
 fmus: $(FMU_STAMP)
@@ -41,6 +41,7 @@ bench: $(FMU_STAMP)
 	$(PY) benchmarks/split.py --experiment 3rrp-circle --steps 300
 	$(PY) benchmarks/loop.py
 	$(PY) benchmarks/ik.py
+	$(PY) benchmarks/arms.py
 	$(PY) benchmarks/sweep.py
 
 # robofmu beside the C++ floor, pydrake and bdsim + Robotics Toolbox on the same loop; each peer

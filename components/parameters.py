@@ -31,8 +31,9 @@ class Parameter:
         Allowed values of a String.
     size : {"joints"}, optional
         A vector Real with one element per joint (FMU parameters ``name[1]`` ..); its value is a
-        list of numbers or the name of one of the robot's configurations (``"home"``), which the
-        block resolves. The bounds apply to every element.
+        list of numbers, one number (the same for every joint) or the name of one of the robot's
+        configurations (``"home"``), which the block resolves. The bounds apply to every
+        element; the unit is the joints' (rad, m).
     """
 
     name: str
@@ -52,6 +53,8 @@ class Parameter:
         if self.size is not None:
             if isinstance(value, str):
                 return value
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                value = [value]                 # one number: the same for every joint
             if not isinstance(value, (list, tuple)) and not hasattr(value, "__len__"):
                 raise ValueError(f"parameter {self.name} = {value!r} is invalid: must be a list of "
                                  "numbers (one per joint) or a configuration name")

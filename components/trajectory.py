@@ -1,10 +1,11 @@
 """Trajectory profiles: LSPB through waypoints, a straight line with a trapezoidal speed profile,
-a synchronized minimum-time bang-bang in joint space, and a task-space circle run once with an
-LSPB phase.
+a synchronized minimum-time bang-bang in joint space, a task-space circle run once with an
+LSPB phase, and a task-space pose line (:class:`PoseLine`: position along a straight line,
+orientation by slerp along the shortest rotation, both on one LSPB time law).
 
 Every profile has ``dim``, ``duration``, ``breakpoints`` (the instants where its acceleration
-jumps) and ``evaluate(t, snap=True) -> (x, xd, xdd)``; it rests at its start before 0 and at its
-end from ``duration`` on. At a breakpoint the value is the one that holds after it (the start
+jumps) and ``evaluate(t, snap=True) -> (x, xd, xdd)`` (:class:`PoseLine`: six arrays, with the
+orientation and its rates); it rests at its start before 0 and at its end from ``duration`` on. At a breakpoint the value is the one that holds after it (the start
 instant already accelerates; the end instant is at rest), as a sampled block holds it.
 
 LSPB: 
@@ -19,6 +20,8 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
+
+from .orientation import UNIT_TOLERANCE
 
 
 def lspb(x0: np.ndarray, x1: np.ndarray, T: float, t: float, cruise_factor: float = 1.5):
@@ -602,3 +605,169 @@ class Circle(_Profile):
                 x[i] = offset + amplitude * sin_phi
                 xd[i] = amplitude * cos_phi * w
                 xdd[i] = amplitude * (cos_phi * alpha - sin_phi * w * w)
+
+
+class PoseLine(_Profile):
+    """A task-space pose move: the frame origin on a straight line, the orientation by slerp
+    along the shortest rotation, both driven by one LSPB time law.
+
+    One scalar s(t) runs from 0 to 1 in ``duration`` by LSPB (cruise speed ``cruise_factor`` x
+    the mean speed), at rest at both ends. With d = ``displacement``, r = ``rotation`` (in the
+    start frame) and R0 the start orientation:
+
+        p(t) = start + s d,          pd = sd d,           pdd = sdd d,
+        R(t) = R0 Exp(s r),          omega = sd R0 r,     omegad = sdd R0 r,
+
+    so R runs from R0 to R1 = R0 Exp(r) about a fixed axis: slerp from R0 to R1. omega and
+    omegad are in the world frame (dR/dt = [omega]x R). The quaternion (x, y, z, w) is
+    q(t) = q0 (x) (u sin(s |r| / 2), cos(s |r| / 2)), u = r / |r|: it starts at ``start_quaternion``
+    (normalised) and never changes sign. Before 0 the pose rests at its start, from
+    ``duration`` on at its end.
+
+    Parameters
+    ----------
+    start : array_like, shape (3,)
+        Start position of the frame origin (m), world frame.
+    displacement : array_like, shape (3,)
+        Straight-line displacement of the origin (m), world frame; may be zero.
+    start_quaternion : array_like, shape (4,)
+        Start orientation (frame relative to world) as a unit quaternion (x, y, z, w), scalar
+        last (scipy's ``Rotation.as_quat``, Pinocchio's ``Quaternion.coeffs()``); its norm must
+        be within 1e-6 of 1 (it is normalised here).
+    rotation : array_like, shape (3,)
+        Rotation vector (axis times angle, rad) in the start frame (the tool's own axes): the end
+        orientation is R0 Exp(rotation). Its angle must be <= pi (the shortest rotation); may be
+        zero.
+    duration : float
+        > 0 (s).
+    cruise_factor : float
+        In (1, 2].
+
+    Raises
+    ------
+    ValueError
+        Naming the offending argument.
+    """
+
+    dim = 3
+
+    def __init__(self, start, displacement, start_quaternion, rotation, duration: float,
+                 cruise_factor: float = 1.5):
+        self.start = _finite_vector(start, "start", 3)
+        self.displacement = _finite_vector(displacement, "displacement", 3)
+        q0 = _finite_vector(start_quaternion, "start_quaternion", 4)
+        norm = float(np.linalg.norm(q0))
+        if not abs(norm - 1.0) <= UNIT_TOLERANCE:
+            raise ValueError(f"start_quaternion: must be a unit quaternion (x, y, z, w) (norm within "
+                             f"{_g(UNIT_TOLERANCE)} of 1), got {q0.tolist()} of norm {_g(norm)}")
+        self.start_quaternion = q0 / norm
+        self.rotation = _finite_vector(rotation, "rotation", 3)
+        self.angle = float(np.linalg.norm(self.rotation))
+        if self.angle > math.pi + 1e-12:          # pi itself, within rounding of the vector's norm
+            shorter = self.rotation * (1.0 - 2.0 * math.pi / self.angle) if self.angle < 2.0 * math.pi else None
+            hint = f" (here {[round(v, 6) for v in shorter.tolist()]})" if shorter is not None else ""
+            raise ValueError(f"rotation: its angle |rotation| = {_g(self.angle)} rad exceeds pi; give the shortest "
+                             f"rotation to the same end orientation, angle <= pi{hint}")
+        self.duration = _positive(duration, "duration", "s")
+        if not (1.0 < cruise_factor <= 2.0):
+            raise ValueError(f"cruise_factor: must lie in (1, 2], got {cruise_factor}")
+        self.cruise_factor = float(cruise_factor)
+        self._s = _LSPBPiece(np.zeros(1), np.ones(1), self.duration, self.cruise_factor)
+        tb = self._s.tb
+        self.breakpoints = np.unique([0.0, tb, self.duration - tb, self.duration])
+        self._break_list = self.breakpoints.tolist()
+        self._s_values = (np.zeros(1), np.zeros(1), np.zeros(1))
+
+        # orientation constants: q0 (x) (u sin h, cos h) = (A sin h + v0 cos h, w0 cos h + B sin h)
+        v0, w0 = self.start_quaternion[:3], float(self.start_quaternion[3])
+        u = self.rotation / self.angle if self.angle > 0.0 else np.zeros(3)
+        self._v0, self._w0 = tuple(v0.tolist()), w0
+        self._a = tuple((w0 * u + np.cross(v0, u)).tolist())
+        self._b = -float(v0 @ u)
+        r = self.rotation                         # R0 r = r + 2 w0 (v0 x r) + 2 v0 x (v0 x r)
+        c = np.cross(v0, r)
+        self.world_rotation = r + 2.0 * w0 * c + 2.0 * np.cross(v0, c)
+        with np.errstate(all="ignore"):
+            self.end = self.start + self.displacement
+        self.end_quaternion = np.empty(4)
+        self._quaternion_into(1.0, self.end_quaternion)
+        self._check_finite()
+
+    def _check_finite(self) -> None:
+        """Refuse parameters whose reference overflows (ValueError naming them): the time law's
+        rate and acceleration (duration), the end point (start, displacement), the peak speeds
+        and accelerations (displacement, rotation with duration)."""
+        problem = self._s.overflow()
+        if problem is not None:
+            what, _, value = problem
+            raise ValueError(f"duration = {_g(self.duration)} s is too short: the time law's {what} would be "
+                             f"{_g(value)} (not finite); give a longer duration")
+        if not _finite(self.end):
+            k = int(np.flatnonzero(~np.isfinite(self.end))[0])
+            raise ValueError(f"start[{k + 1}] = {_g(self.start[k])} and displacement[{k + 1}] = "
+                             f"{_g(self.displacement[k])} m: the end point's coordinate {k + 1} would be "
+                             f"{_g(self.end[k])} (beyond the largest float)")
+        sd, sdd = abs(float(self._s.V[0])), abs(float(self._s.a[0]))      # peak rate, acceleration of s
+        with np.errstate(all="ignore"):
+            peaks = {"displacement": (self.displacement, "m/s", "m/s2"),
+                     "rotation": (self.world_rotation, "rad/s", "rad/s2")}
+            for name, (vector, v_unit, a_unit) in peaks.items():
+                length = float(np.linalg.norm(vector))
+                if not _finite(length * sd, length * sdd):
+                    raise ValueError(f"{name} and duration = {_g(self.duration)} s: the peak speed would be "
+                                     f"{_g(length * sd)} {v_unit} and acceleration {_g(length * sdd)} {a_unit} "
+                                     f"(not finite); give a smaller {name} or a longer duration")
+
+    def path(self, t: float) -> tuple[float, float, float]:
+        """s, sd (1/s), sdd (1/s^2) at ``t``: LSPB from 0 to 1, at rest outside."""
+        if t < 0.0 or t >= self.duration:
+            return (0.0 if t < 0.0 else 1.0), 0.0, 0.0
+        s, sd, sdd = self._s_values
+        self._s.evaluate_into(t, s, sd, sdd)
+        return float(s[0]), float(sd[0]), float(sdd[0])
+
+    def _quaternion_into(self, s: float, quaternion: np.ndarray) -> None:
+        """q0 (x) (u sin(s |r| / 2), cos(s |r| / 2)) written into ``quaternion`` (x, y, z, w)."""
+        h = 0.5 * s * self.angle
+        sin_h, cos_h = math.sin(h), math.cos(h)
+        (ax, ay, az), (vx, vy, vz) = self._a, self._v0
+        quaternion[0] = ax * sin_h + vx * cos_h
+        quaternion[1] = ay * sin_h + vy * cos_h
+        quaternion[2] = az * sin_h + vz * cos_h
+        quaternion[3] = self._w0 * cos_h + self._b * sin_h
+
+    def evaluate(self, t: float, snap: bool = True):
+        """Position (m), velocity (m/s), acceleration (m/s^2), quaternion (x, y, z, w), angular
+        velocity (rad/s) and angular acceleration (rad/s^2, both world frame) at time ``t`` (s):
+        new arrays of shapes (3,), (3,), (3,), (4,), (3,), (3,).
+
+        Before its start the pose rests at its start, after its end at its end. With ``snap``,
+        times within 1e-9 s of a breakpoint are evaluated at the breakpoint (sampled use);
+        without, the exact branch at ``t``.
+        """
+        x, xd, xdd, omega, omegad = (np.empty(3) for _ in range(5))
+        quaternion = np.empty(4)
+        self.evaluate_into(t, x, xd, xdd, quaternion, omega, omegad, snap)
+        return x, xd, xdd, quaternion, omega, omegad
+
+    def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
+                      quaternion: np.ndarray, omega: np.ndarray, omegad: np.ndarray,
+                      snap: bool = True) -> None:
+        """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (shape (3,)), ``quaternion``
+        (shape (4,)), ``omega``, ``omegad`` (shape (3,)); no allocation."""
+        if snap:
+            t = snap_to(self._break_list, t)
+        if t < 0.0 or t >= self.duration:
+            x[:] = self.start if t < 0.0 else self.end
+            quaternion[:] = self.start_quaternion if t < 0.0 else self.end_quaternion
+            xd[:], xdd[:], omega[:], omegad[:] = 0.0, 0.0, 0.0, 0.0
+            return
+        s, sd, sdd = self.path(t)
+        d, w = self.displacement, self.world_rotation
+        np.multiply(d, s, out=x)
+        np.add(self.start, x, out=x)                 # start + s d
+        np.multiply(d, sd, out=xd)
+        np.multiply(d, sdd, out=xdd)
+        self._quaternion_into(s, quaternion)
+        np.multiply(w, sd, out=omega)
+        np.multiply(w, sdd, out=omegad)

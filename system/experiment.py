@@ -6,7 +6,10 @@ the signal roles) or names a ``base`` diagram and sets block parameters
 experiments, so a user's file anywhere can build on a packaged diagram; a base may have a base
 of its own. A string parameter value ``"robot:gains.pid.kp"`` is read from the robot's typed
 description (``gains.pid.kp``, ``payload.mass``, ``configurations.home``), so the seed's gains
-and the pawn's mass live in one place.
+and the pawn's mass live in one place. ``robot`` names a robot of the package, or a robot TOML
+file by its path (``"myarm/myarm.toml"``: relative to the experiment file that says so; the
+loaded System holds it as an absolute path). FMU paths are relative to the FMU folder (the
+file's ``fmu_dir``, else ``fmus``, relative to the working folder; ``--fmus`` overrides).
 
 ``[roles]`` names the signals analysis and plots need, by what they mean: ``q`` (measured joint
 positions), ``q_ref`` (joint reference), ``tau`` (joint efforts), and where the diagram has them
@@ -22,10 +25,11 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import tomllib
 from pathlib import Path
 
-from robofmu.components.robots import load_description
+from robofmu.components.robots import is_robot_file, load_description
 
 from robofmu.system import defaults
 from robofmu.system.diagram import System, Wire, parameter_address
@@ -37,12 +41,13 @@ EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 ROLES = {"q": "measured joint positions", "qd": "measured joint velocities",
          "q_ref": "joint position reference", "tau": "joint efforts",
          "x_ref": "task-space reference", "x": "measured task coordinates (a plant's pose output)",
+         "quat_ref": "a pose task's orientation reference (unit quaternion x, y, z, w)",
          "grip": "gripper closed"}
 
 #: Top-level keys of an experiment file, and what each must hold.
 KEYS = {"name": "a string (the experiment's name)",
         "description": "a string",
-        "robot": "a string (a described robot)",
+        "robot": "a string (a robot of the package, or the path of a robot TOML relative to this file)",
         "stop_time": "a time in s > 0",
         "step": "a communication step in s > 0",
         "algorithm": " or ".join(repr(a) for a in defaults.ALGORITHMS),
@@ -244,6 +249,8 @@ def _merged(path: Path, seen: tuple[Path, ...] = ()) -> dict:
         raise ExperimentError(path, "base", f"the bases form a cycle: {chain}")
     data = _read(path)
     _check_file(path, data)
+    if isinstance(data.get("robot"), str) and is_robot_file(data["robot"]):     # relative to this file
+        data["robot"] = os.path.abspath(path.parent / os.path.expanduser(data["robot"]))
     if "base" in data:
         base = _merged(_base_path(path, data["base"]), (*seen, path.resolve()))
         overrides = data.pop("parameters", {})

@@ -273,16 +273,74 @@ class FMUInstance:
 
 
 def block_identity(path: str | Path) -> dict[str, str]:
-    """Robot, kind, variant and source hash a robofmu FMU declares in its vendor annotation.
+    """Robot, kind, variant, code hash (``source``) and robot data hash (``robot_data``) a
+    robofmu FMU declares in its vendor annotation.
 
     Raises
     ------
     ValueError
         If the FMU carries no robofmu annotation (not a robofmu block).
     """
+    return _identity(_model_description(path), path)
+
+
+def _model_description(path: str | Path) -> ElementTree.Element:
     with zipfile.ZipFile(path) as archive:
-        root = ElementTree.fromstring(archive.read("modelDescription.xml"))
+        return ElementTree.fromstring(archive.read("modelDescription.xml"))
+
+
+def _identity(root: ElementTree.Element, path: str | Path) -> dict[str, str]:
     node = root.find(f"VendorAnnotations/Tool[@name='{VENDOR_TOOL}']/Block")
     if node is None:
         raise ValueError(f"{path}: not a robofmu block (no {VENDOR_TOOL} vendor annotation)")
     return dict(node.attrib)
+
+
+def stale_reasons(path: str | Path, robot=None) -> list[str]:
+    """Why the robofmu FMU at ``path`` is stale for this installation, in words (none: fresh).
+
+    - ``"robofmu version changed"``: its model description's version (``<version>+...``) is not
+      the installed robofmu's (package metadata);
+    - ``"code changed"``: it bundles other code (its annotation's ``source`` is not
+      :data:`robofmu.components.SOURCE_HASH`; the code only, no robot's data);
+    - ``"robot data changed"``: the robot's TOML or URDF it carries are not those of ``robot``
+      now (its annotation's ``robot_data`` against :func:`robofmu.components.robot_data_hash`;
+      a FMU built before robot data was hashed apart has none, and its code changed).
+
+    Parameters
+    ----------
+    path : str or Path
+        A robofmu block FMU.
+    robot : RobotDescription, optional
+        The robot the FMU is for as described now; default: the package's robot of the FMU's
+        name, if there is one (else the robot's data is not compared).
+
+    Raises
+    ------
+    ValueError
+        If the FMU is not a robofmu block (:func:`block_identity`).
+    """
+    from importlib import metadata
+
+    from robofmu.components import SOURCE_HASH, robot_data_hash
+    from robofmu.components.robots import available, load_description
+
+    root = _model_description(path)
+    identity, version = _identity(root, path), root.get("version", "")
+    try:
+        installed = metadata.version("robofmu")
+    except metadata.PackageNotFoundError:
+        installed = None
+    reasons = []
+    if installed is not None and version.split("+", 1)[0] != installed:
+        reasons.append("robofmu version changed")
+    if identity.get("source") != SOURCE_HASH:
+        reasons.append("code changed")
+    if robot is None and identity.get("robot") in available():
+        robot = load_description(identity["robot"])
+    if robot is not None:
+        if robot.name != identity.get("robot"):
+            reasons.append(f"built for robot {identity.get('robot')!r}, not {robot.name!r}")
+        elif "robot_data" in identity and identity["robot_data"] != robot_data_hash(robot.path, robot.urdf):
+            reasons.append("robot data changed")
+    return reasons

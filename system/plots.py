@@ -18,8 +18,9 @@ from robofmu.system.roles import Roles  # noqa: E402
 from robofmu.system.units import printed, small  # noqa: E402
 
 COLORS = ["tab:red", "tab:green", "tab:blue", "k", "tab:orange", "tab:purple"]
-#: The iterative IK solvers' diagnostics a run may record as outputs ``<instance>.<name>``.
-DIAGNOSTICS = ("iterations", "residual")
+#: The iterative IK solvers' diagnostics a run may record as outputs ``<instance>.<name>``, and the
+#: name each is drawn as (a pose solver's position residual is its residual here).
+DIAGNOSTICS = {"iterations": "iterations", "residual": "residual", "position_residual": "residual"}
 
 
 def _save(fig, path: Path, tight: bool = True) -> Path:
@@ -157,6 +158,56 @@ SKETCH_STYLES = {"links": dict(lw=2.5, solid_capstyle="round"), "passive": dict(
                  "end_effector": dict(lw=2.0, marker="o", ms=5, markevery=[0])}
 
 
+def tool_pose(result: Result, roles: Roles, path: Path, title: str) -> Path:
+    """A pose task's run: the task frame's path in space, FK(q) of the recorded joints beside the
+    reference, with the frame's axes drawn at a few instants (left), and over time the position
+    error |FK(q) - x_ref| (mm) and the orientation error |log3(R_ref^T R(q))| (mrad) (right)."""
+    from robofmu.components.orientation import rotation_of
+
+    roles.require("q", "x_ref", "quat_ref")
+    model = roles.model()
+    q = roles.vector(result, "q")
+    poses = roles.poses(result, model)
+    reference = roles.vector(result, "x_ref")
+    quaternions = roles.vector(result, "quat_ref")
+    position, orientation = roles.task_errors(result, model, poses)
+    fig = plt.figure(figsize=(12, 5.2))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ax.plot(*reference.T, color="0.5", lw=4, label="reference")
+    ax.plot(*poses.T, color="tab:red", lw=1, label="FK(q)")
+    span = float(np.ptp(reference, axis=0).max()) or 0.1
+    for k in np.linspace(0, len(q) - 1, 5).astype(int):
+        R, origin = rotation_of(quaternions[k]), reference[k]
+        for axis, color in zip(range(3), ("tab:red", "tab:green", "tab:blue")):
+            ax.plot(*np.array([origin, origin + 0.15 * span * R[:, axis]]).T, color=color, lw=1.5)
+    center = (reference.max(axis=0) + reference.min(axis=0)) / 2
+    half = 0.6 * span                                   # one scale on the three axes
+    ax.set_xlim(center[0] - half, center[0] + half)
+    ax.set_ylim(center[1] - half, center[1] + half)
+    ax.set_zlim(center[2] - half, center[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+    travel = reference[-1] - reference[0]                # seen from the side of the travel
+    ax.view_init(elev=20.0, azim=float(np.degrees(np.arctan2(travel[1], travel[0]))) - 70.0)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"{title}: path of {model.description.task.frame} (axes: reference x, y, z)", fontsize=10)
+    top = fig.add_subplot(2, 2, 2)
+    top.plot(result.time, position * 1e3, color="tab:red")
+    top.set_ylabel("position error (mm)")
+    top.set_title(f"max {position.max() * 1e3:.4f} mm, at the end {position[-1] * 1e3:.2e} mm", fontsize=9)
+    bottom = fig.add_subplot(2, 2, 4, sharex=top)
+    bottom.plot(result.time, orientation * 1e3, color="tab:blue")
+    bottom.set_ylabel("orientation error (mrad)")
+    bottom.set_title(f"max {orientation.max() * 1e3:.4f} mrad, at the end {orientation[-1] * 1e3:.2e} mrad",
+                     fontsize=9)
+    bottom.set_xlabel("time (s)")
+    for a in (top, bottom):
+        a.grid(alpha=0.3)
+    return _save(fig, path)
+
+
 def mechanism(result: Result, roles: Roles, path: Path, title: str, instants: int = 6) -> Path | None:
     """The mechanism drawn at ``instants`` recorded instants evenly spaced along the path of its
     first two task coordinates (in time where it does not move) by a model's ``sketch(q)`` (plane
@@ -237,7 +288,7 @@ def solver_diagnostics(result: Result) -> dict[str, dict[str, np.ndarray]]:
     for column in result.columns:
         instance, _, name = column.partition(".")
         if name in DIAGNOSTICS:
-            found.setdefault(instance, {})[name] = result[column]
+            found.setdefault(instance, {})[DIAGNOSTICS[name]] = result[column]
     return found
 
 

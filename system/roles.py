@@ -9,7 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
+import pinocchio as pin
 
+from robofmu.components.orientation import rotation_of
 from robofmu.components.robots import RobotModel, load_model
 
 from robofmu.system import experiment
@@ -29,6 +31,8 @@ class Roles:
         Vector bases, e.g. ``"plant.q"``.
     x_ref, x, grip : str or None
         ``x``: measured task coordinates (a plant's pose output).
+    quat_ref : str or None
+        A pose task's orientation reference, a unit quaternion (x, y, z, w).
     """
 
     robot: str
@@ -38,6 +42,7 @@ class Roles:
     tau: str | None = None
     x_ref: str | None = None
     x: str | None = None
+    quat_ref: str | None = None
     grip: str | None = None
 
     @classmethod
@@ -81,9 +86,12 @@ class Roles:
 
     def task_errors(self, result: Result, model: RobotModel | None = None, poses: np.ndarray | None = None):
         """(position, orientation) errors at every recorded point, FK(q) against x_ref: the
-        task point's distance (m, :meth:`tcp_error`) and max_i |FK(q)_i - x_ref_i| (rad) over
-        the coordinates measured in rad (None where the task has none); None without an x_ref role.
-        ``poses``: FK(q) of the result where the caller has it (:meth:`poses`), else computed."""
+        task point's distance (m, :meth:`tcp_error`) and the orientation error (rad): for a pose
+        task with a ``quat_ref`` role the rotation angle from the reference to the frame's
+        orientation over the tracked axes, |S_o log3(R_ref^T R(q))|, else max_i |FK(q)_i - x_ref_i|
+        over the coordinates measured in rad (None where the task has none); None without an
+        x_ref role. ``poses``: FK(q) of the result where the caller has it (:meth:`poses`), else
+        computed."""
         if self.x_ref is None or self.q is None:
             return None
         model = model or self.model()
@@ -91,8 +99,10 @@ class Roles:
             poses = self.poses(result, model)
         difference = poses - result.vector(self.x_ref)
         position, angle = task_axes(model)
-        return (np.linalg.norm(difference[:, position], axis=1),
-                np.abs(difference[:, angle]).max(axis=1) if angle else None)
+        orientation = np.abs(difference[:, angle]).max(axis=1) if angle else None
+        if model.orientation_axes and self.quat_ref is not None:
+            orientation = orientation_errors(model, self.vector(result, "q"), result.vector(self.quat_ref))
+        return np.linalg.norm(difference[:, position], axis=1), orientation
 
     def events(self, result: Result) -> dict[str, float]:
         """Instants where the gripper closes and opens (s), from the recorded ``grip`` role."""
@@ -104,6 +114,14 @@ class Roles:
         for k in change:
             events["grip closes" if closed[k + 1] else "grip opens"] = float(result.time[k + 1])
         return events
+
+
+def orientation_errors(model: RobotModel, q: np.ndarray, quaternions: np.ndarray) -> np.ndarray:
+    """|S_o log3(R_ref^T R(q))| (rad) at every row of ``q`` (k, n) against the reference
+    quaternions (k, 4) (x, y, z, w), over the model's tracked orientation axes."""
+    rows = list(model.orientation_axes)
+    return np.array([np.linalg.norm(pin.log3(rotation_of(reference).T @ model.rotation(joints))[rows])
+                     for joints, reference in zip(q, quaternions)])
 
 
 def task_axes(model: RobotModel) -> tuple[list[int], list[int]]:

@@ -61,7 +61,8 @@ class Run:
 
 def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]) -> list[Path]:
     """The figures of one run: block diagram, references, tracking, efforts (where the run has a
-    ``tau`` role), the task coordinates (where it has an ``x`` role), the mechanism at several
+    ``tau`` role), the task coordinates (where it has an ``x`` role), a pose task's path and
+    errors (where it has ``x_ref`` and ``quat_ref`` roles), the mechanism at several
     instants (where the robot's model draws itself) and the iterations of an iterative solver
     where the run recorded some."""
     from robofmu.system import plots
@@ -75,6 +76,8 @@ def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]
         made.append(plots.efforts(result, roles, out / "efforts.png", system.name))
     if roles.x:
         made.append(plots.pose(result, roles, out / "pose.png", system.name))
+    if roles.quat_ref and roles.x_ref:
+        made.append(plots.tool_pose(result, roles, out / "tool_pose.png", system.name))
     drawing = plots.mechanism(result, roles, out / "mechanism.png", system.name)
     if drawing is not None:                        # a model that draws itself (sketch)
         made.append(drawing)

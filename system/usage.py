@@ -213,9 +213,12 @@ def check_times(step: float | None, stop_time: float | None) -> None:
 
 
 def check_fmu_folder(system: System, option: str = "--fmus") -> None:
-    """Refuse (:class:`UsageError`) a missing FMU folder, missing FMUs, or robofmu FMUs built from
-    other sources than this process runs; each message says how to build them."""
-    from robofmu.components import SOURCE_HASH
+    """Refuse (:class:`UsageError`) a missing FMU folder, missing FMUs, or robofmu FMUs that are
+    stale for this run (:func:`robofmu.system.fmu.stale_reasons`): built from other code than
+    this process runs, or carrying other data of the experiment's robot than its description
+    now holds (a FMU built before a robofmu version change, its code the same, runs as built).
+    Each message says how to build them."""
+    from robofmu.components.robots import load_description
 
     folder = system.fmu_dir
     robot = system.extra.get("robot")
@@ -230,19 +233,31 @@ def check_fmu_folder(system: System, option: str = "--fmus") -> None:
         names = ", ".join(str(spec.fmu) for spec in missing)
         where = f"{option} {folder}" if all(spec in relative for spec in missing) else "FMU"
         raise UsageError(f"{where}: no {names} (for {system.source or system.name}); build them: {build}")
-    from robofmu.system.fmu import block_identity
+    from robofmu.system.fmu import block_identity, stale_reasons
 
-    stale = []
+    try:
+        description = load_description(robot) if isinstance(robot, str) else None
+    except ValueError:
+        description = None
+    code, data = [], []
     for spec in system.blocks:
+        path = system.fmu_path(spec)
         try:
-            identity = block_identity(system.fmu_path(spec))
+            identity = block_identity(path)
         except Exception:              # not a robofmu block, or not a valid FMU: the plan names it
             continue
-        if identity.get("source") != SOURCE_HASH:
-            stale.append(str(spec.fmu))
-    if stale:
-        raise UsageError(f"{option} {folder}: {', '.join(stale)} built from other robofmu sources than this "
+        mine = description if description is not None and identity.get("robot") == description.name else None
+        reasons = stale_reasons(path, mine)
+        if "code changed" in reasons:
+            code.append(str(spec.fmu))
+        elif "robot data changed" in reasons:
+            data.append(str(spec.fmu))
+    if code:
+        raise UsageError(f"{option} {folder}: {', '.join(code)} built from other robofmu sources than this "
                          f"one runs; rebuild: {build}")
+    if data:
+        raise UsageError(f"{option} {folder}: {', '.join(data)} built from other data of robot "
+                         f"{description.name!r} than {description.path} holds now; rebuild: {build}")
 
 
 def times_given(system: System, step: float | None, stop_time: float | None) -> str:

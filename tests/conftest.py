@@ -24,6 +24,7 @@ from robofmu.components.robots import available, load_description, load_model
 #: the FMUs; slow: (nearly) every test of the module takes 2 s or more; study: a study, sweep or
 #: packaged experiment end to end.
 MODULE_MARKERS = {
+    "test_arms.py": ("slow", "study"),                   # two 3 s runs of the industrial arms
     "test_c_host.py": ("interop",),
     "test_container.py": ("interop",),
     "test_ecos.py": ("interop",),
@@ -105,3 +106,11 @@ def raw_instances():
     yield open_
     for instance in opened:
         instance.close()
+
+
+@pytest.fixture
+def copy_robot(tmp_path):
+    """``copy_robot(robot, edit=None, stem=None)``: a robot's folder copied to tmp_path, its TOML
+    edited (:func:`robot_files.robot_copier`); returns the TOML's path."""
+    from robot_files import robot_copier
+    return robot_copier(tmp_path)

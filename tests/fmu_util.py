@@ -49,7 +49,7 @@ def robot_blocks(kinds=None, robots=None) -> list:
 #: One computed-torque PD experiment per robot (its flagship loop): for the tests that run every
 #: robot's whole diagram in another FMI tool (a PD loop has no state in its feedthrough blocks).
 PD_EXPERIMENTS = {"chess": "chess-pd", "rrp": "rrp-line", "rpp": "rpp-bangbang", "planar2r": "planar2r-nr",
-                  "rrp_offset": "rrp_offset-nr", "3rrp": "3rrp-circle"}
+                  "rrp_offset": "rrp_offset-nr", "3rrp": "3rrp-circle", "ur5": "ur5-pose", "panda": "panda-pose"}
 
 
 def robot_experiments() -> list:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from robofmu.components.blocks import block_class, make_block
@@ -156,14 +157,19 @@ def test_jacobian_block_takes_a_serial_arm_too(robot):
     q = model.configuration("home") + 0.05
     b.set("q", q)
     b.output(0.0)
-    J = b.get("J").reshape(model.m, model.n)
+    J = b.get("J").reshape(model.task_rows, model.n)
     eps = 1e-6
     fd = np.column_stack([(model.fk(q + eps * e) - model.fk(q - eps * e)) / (2 * eps) for e in np.eye(model.n)])
+    if model.orientation_axes:                      # a pose task: the rotation about the frame's own axes
+        turn = np.column_stack([pin.log3(model.rotation(q - eps * e).T @ model.rotation(q + eps * e)) / (2 * eps)
+                                for e in np.eye(model.n)])
+        fd = np.vstack([fd, turn[list(model.orientation_axes)]])
     np.testing.assert_allclose(J, fd, rtol=0, atol=1e-8)
     units = {v.name: v.unit for v in b.variables}
-    for i in range(model.m):
+    tasks = model.task_units(0) + ["rad"] * len(model.orientation_axes)
+    for i in range(model.task_rows):
         for j in range(model.n):
-            expected = {("m", "rad"): "m/rad", ("m", "m"): "1"}[(model.task_units(0)[i], model.joint_units(0)[j])]
+            expected = {("m", "rad"): "m/rad", ("m", "m"): "1", ("rad", "rad"): "1"}[(tasks[i], model.joint_units(0)[j])]
             assert units[f"J[{i + 1},{j + 1}]"] == expected
 
 

@@ -121,7 +121,7 @@ MISTAKES = {
                           ["stop time 13 s", "--step-size 0.003 s", "give --stop-time"]),
     "stop-below-step": (["run", "chess-pd", "--stop-time", "0.0004", "--fmus", "{fmus}"], ["--stop-time 0.0004 s is shorter"]),
     "too-many-steps": (["run", "chess-pd", "--step-size", "1e-9", "--stop-time", "1000", "--fmus", "{fmus}"],
-                       ["--step-size 1e-09, --stop-time 1000", "1000000000000 steps x 35 recorded signals", "memory"]),
+                       ["--step-size 1e-09, --stop-time 1000", "1000000000000 steps x 36 recorded signals", "memory"]),
     "absurd-steps": (["run", "chess-pd", "--step-size", "1e-300", "--stop-time", "1e300"], ["--step-size 1e-300", "steps"]),
     "out-is-a-file": (["run", "chess-pd", "--out", "afile", "--fmus", "{fmus}"],
                       ["--out afile: exists and is a file, not a folder"]),
@@ -287,7 +287,7 @@ def test_record_selection_exact_names_vector_bases_patterns(fmu_root):
     with pytest.raises(DiagramError) as info:
         Master(system, record=["plant.q", "plant.q[9]", "plnt.*"]).check()
     text = str(info.value)
-    assert "record: 'plant.q[9]' names no output (outputs of plant: plant.q[1..4], plant.qd[1..4])" in text
+    assert "record: 'plant.q[9]' names no output (outputs of plant: plant.q[1..4], plant.qd[1..4], plant.within_limits)" in text
     assert "record: 'plnt.*' names no output (outputs: trajectory.x_ref[1..3]" in text
     assert "'plant.q'" not in text
 

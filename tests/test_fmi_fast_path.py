@@ -85,7 +85,8 @@ def test_the_fast_path_serves_the_hot_calls_once_initialized(fmu_root, raw, robo
     assert r.call("fmi2Terminate") == OK
     assert r.get_real(reals)[0] == OK and r.set_real(inputs, starts(r, inputs)) == OK     # pythonfmu's
     assert r.fast_calls == 16
-    assert r.messages == []
+    # the only message: a plant driven by its start inputs alone (no torque) may leave its limits
+    assert [m for m in r.messages if " limit " not in m[2] or block != "plant"] == []
 
 
 def test_the_fast_path_can_be_switched_off_and_a_slave_outside_a_fmu_has_none(fmu_root, raw):
@@ -295,7 +296,8 @@ def test_state_restore_then_the_same_steps_give_the_same_bits(fmu_root, raw, rob
     np.testing.assert_array_equal(bits(again), bits(first))
     assert r.call("fmi2FreeFMUstate", ctypes.byref(state)) == OK
     assert r.fast_calls == 5 * 2 + 1 + 2 * (2 + 6 * 3 + 1)      # FMU state calls: pythonfmu's
-    assert r.messages == []
+    # the only message: a plant driven by test inputs may leave its limits (rrp's home is on one)
+    assert [m for m in r.messages if " limit " not in m[2] or block != "plant"] == []
 
 
 # -- a host that is not Python --------------------------------------------------------------------
@@ -403,7 +405,8 @@ def test_a_host_that_is_not_python_gets_the_same_through_the_fast_path(fmu_root,
 
 
 # -- a whole experiment ---------------------------------------------------------------------------
-EXPERIMENTS = ["chess-pd", "3rrp-circle", "planar2r-nr", "rpp-bangbang", "rrp-line", "rrp_offset-nr"]
+EXPERIMENTS = ["chess-pd", "3rrp-circle", "planar2r-nr", "rpp-bangbang", "rrp-line", "rrp_offset-nr", "ur5-pose",
+               "panda-pose"]
 
 
 @pytest.mark.parametrize("name", EXPERIMENTS)

@@ -15,7 +15,8 @@ before the fix.
 An audit hook (``sys.addaudithook``, event ``open``) in the child records every path Python opens
 during each run: no run opens anything under another run's extraction folder (each is known from
 the ``tempfile.mkdtemp`` event of fmpy's extraction), and each run does open its own robot's TOML
-in its own folder (the hook sees the FMUs' reads). Opens by C code (dlopen, pythonfmu's C++)
+in its own folder, ``resources/robot/<robot>.toml`` (the hook sees the FMUs' reads; the bundled
+package holds no robot's data). Opens by C code (dlopen, pythonfmu's C++)
 are not Python's and not seen.
 
 The results are finite, move (the plants fall or are pushed, the IK reaches its target through
@@ -161,7 +162,7 @@ def _check_isolation(result, runs):
     assert sorted(extraction) == list(range(len(runs)))
     for k, (fmu, _) in enumerate(runs):
         robot = fmu.parent.name
-        toml = os.path.join(extraction[k], "resources", "robofmu", "components", "robots", robot, f"{robot}.toml")
+        toml = os.path.join(extraction[k], "resources", "robot", f"{robot}.toml")
         assert any(r == k and _real(p) == _real(toml) for r, p in result["opens"]), \
             f"run {k} ({fmu}) did not read its robot's TOML from its own folder"
         assert result["results"][k]["folders_left"] == [], f"run {k}'s extraction folder was not deleted"

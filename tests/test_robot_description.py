@@ -7,11 +7,9 @@ same description, so each refusal below is caused by its edit alone.
 """
 from __future__ import annotations
 
-import json
 import math
 import re
-import shutil
-import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,84 +19,7 @@ from robofmu.components.robots import (ROBOTS_DIR, DescriptionError, RobotModel,
                                        load_description, load_model)
 from robofmu.components.robots.description import read
 
-
-# -- writing TOML ----------------------------------------------------------------------------------
-def _key(k: str) -> str:
-    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
-
-
-def _value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
-    raise TypeError(f"cannot write {v!r} as TOML")
-
-
-def dump_toml(data: dict, prefix: str = "") -> str:
-    """``data`` as TOML: scalars and arrays first, then one ``[table]`` per sub-table."""
-    lines = [f"{_key(k)} = {_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    for k, v in data.items():
-        if isinstance(v, dict):
-            name = f"{prefix}{_key(k)}"
-            lines += ["", f"[{name}]", dump_toml(v, name + ".")]
-    return "\n".join(lines) + "\n"
-
-
-def _parent(data: dict, dotted: str):
-    *path, last = dotted.split(".")
-    for k in path:
-        data = data[k]
-    return data, last
-
-
-def set_key(data: dict, dotted: str, value) -> None:
-    parent, last = _parent(data, dotted)
-    parent[last] = value
-
-
-def del_key(data: dict, dotted: str) -> None:
-    parent, last = _parent(data, dotted)
-    del parent[last]
-
-
-@pytest.fixture
-def copy_robot(tmp_path):
-    """``copy_robot(robot, edit=None, stem=None)``: the robot's folder copied to tmp_path, its TOML
-    rewritten after ``edit(data)`` as ``<stem>.toml`` (default the robot's name); returns the path."""
-    def make(robot: str, edit=None, stem: str | None = None):
-        folder = tmp_path / robot
-        if not folder.exists():
-            shutil.copytree(ROBOTS_DIR / robot, folder, ignore=shutil.ignore_patterns("*.toml", "__pycache__"))
-        data = tomllib.loads((ROBOTS_DIR / robot / f"{robot}.toml").read_text())
-        if edit is not None:
-            edit(data)
-        path = folder / f"{stem or robot}.toml"
-        path.write_text(dump_toml(data))
-        return path
-    return make
-
-
-def refusal(path, key: str) -> str:
-    """The DescriptionError of reading ``path``, checked to name the file and ``key``."""
-    with pytest.raises(DescriptionError) as info:
-        read(path)
-    exc = info.value
-    assert exc.key == key, str(exc)
-    assert exc.path == path
-    text = str(exc)
-    assert text.startswith(f"{path}: {key}: "), text
-    return text
+from robot_files import del_key, refusal, set_key
 
 
 # -- a faithful copy -------------------------------------------------------------------------------
@@ -106,9 +27,14 @@ def test_an_unedited_copy_reads_back_the_same_description(robot, copy_robot):
     path = copy_robot(robot)
     copy, real = read(path), load_description(robot)
     assert copy.path == path
-    assert copy.urdf == (None if real.urdf is None else path.parent / real.urdf.name)   # None: a closed chain
+    if real.urdf is None:                                   # a closed chain
+        assert copy.urdf is None
+    elif real.urdf.is_relative_to(ROBOTS_DIR):              # beside the TOML: copied with it
+        assert copy.urdf == path.parent / real.urdf.name
+    else:                                                   # an installed distribution's file
+        assert copy.urdf == real.urdf
     for field in ("name", "summary", "blocks", "task", "configurations", "gravity", "gravity_direction",
-                  "payload", "gains", "default_gains", "trajectory", "ik", "mechanism"):
+                  "payload", "gains", "default_gains", "trajectory", "ik", "mechanism", "locked"):
         assert getattr(copy, field) == getattr(real, field), field
     assert load_model(copy).n == load_model(real).n
 
@@ -369,7 +295,7 @@ def test_load_model_picks_the_class_by_the_descriptions_kind():
 
 # -- the described robots --------------------------------------------------------------------------
 def test_the_robots_are_described():
-    assert available() == ["3rrp", "chess", "planar2r", "rpp", "rrp", "rrp_offset"]
+    assert available() == ["3rrp", "chess", "panda", "planar2r", "rpp", "rrp", "rrp_offset", "ur5"]
 
 
 def test_every_described_robot_loads(robot):
@@ -463,9 +389,6 @@ def _edited_rrp(copy_robot, old: str, new: str):
 
 
 @pytest.mark.parametrize("old, new, message", [
-    ('<joint name="joint2" type="revolute">', '<joint name="joint2" type="continuous">',
-     r"rrp.urdf: joint 'joint2' is continuous \(Pinocchio's q = \(cos, sin\)\); robofmu supports revolute and "
-     r"prismatic joints"),
     ('<mass value="0.5"/>', '<mass value="0.0"/>',
      r"rrp.urdf: link 'link2' \(moved by joint 'joint2'\) has no mass \(0 kg\): give it an <inertial> with mass > 0"),
     ('<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/>',
@@ -494,4 +417,168 @@ def test_a_link_without_an_inertial_is_refused_naming_it(copy_robot):
     start = text.index("<inertial_removed>")
     urdf.write_text(text[:start] + text[text.index("</inertial>", start) + len("</inertial>"):])
     with pytest.raises(ValueError, match=r"link 'link2' \(moved by joint 'joint2'\) has no mass \(0 kg\)"):
+        load_model(description)
+
+
+# -- URDFs of installed distributions, locked joints, pose tasks ----------------------------------------
+def test_a_urdf_from_an_installed_distribution_is_found_by_the_end_of_its_path():
+    from importlib import metadata
+    description = load_description("ur5")
+    distribution = metadata.distribution("example-robot-data")
+    assert description.urdf.is_file()
+    assert description.urdf.as_posix().endswith("/robots/ur_description/urdf/ur5_robot.urdf")
+    assert description.urdf.is_relative_to(Path(distribution.locate_file("")))
+    assert not description.urdf.is_relative_to(ROBOTS_DIR)        # referenced, never copied
+
+
+@pytest.mark.parametrize("reference, problem", [
+    ({"distribution": "no-such-distribution-robofmu", "path": "a.urdf"},
+     "the distribution 'no-such-distribution-robofmu' is not installed (pip install no-such-distribution-robofmu)"),
+    ({"distribution": "example-robot-data", "path": "robots/no_such_robot.urdf"},
+     "has 0 files whose path ends with 'robots/no_such_robot.urdf'; exactly one is needed"),
+    ({"distribution": "example-robot-data", "path": "anymal.urdf"},          # two robots' files
+     "has 2 files whose path ends with 'anymal.urdf': "),
+    ({"distribution": "example-robot-data"}, "missing"),
+    ({"distribution": "example-robot-data", "path": "x.urdf", "version": 6}, "unknown key"),
+])
+def test_a_distribution_reference_that_finds_no_single_file_is_refused(copy_robot, reference, problem):
+    path = copy_robot("ur5", lambda d: set_key(d, "urdf", reference))
+    with pytest.raises(DescriptionError) as info:
+        read(path)
+    assert info.value.path == path and info.value.key.startswith("urdf"), str(info.value)
+    assert problem in str(info.value)
+
+
+@pytest.mark.parametrize("value, problem", [
+    ([], "must name at least one axis (leave the key out for a position task)"),
+    ([0, 3], "must be distinct axes of the frame among 0, 1, 2, got [0.0, 3.0]"),
+    ([1, 1], "must be distinct axes of the frame among 0, 1, 2"),
+])
+def test_orientation_axes_are_checked(copy_robot, value, problem):
+    path = copy_robot("ur5", lambda d: set_key(d, "task.orientation_axes", value))
+    assert problem in refusal(path, "task.orientation_axes")
+
+
+def test_a_pose_task_has_rows_for_its_orientation_axes(copy_robot):
+    assert load_description("ur5").task.orientation_axes == (0, 1, 2)
+    assert load_model("ur5").task_rows == 6 and load_model("rrp").task_rows == 3
+    path = copy_robot("ur5", lambda d: set_key(d, "task.orientation_axes", [0, 1]))
+    assert load_model(read(path)).task_rows == 5
+
+
+def test_locked_joints_leave_the_model_at_their_values():
+    import pinocchio as pin
+    panda = load_model("panda")
+    assert panda.n == 7 and "panda_finger_joint1" not in panda.joint_names
+    full = pin.buildModelFromUrdf(str(panda.description.urdf))
+    assert full.nq == 9
+    q = np.array(panda.description.configuration("home"))
+    data = full.createData()
+    pin.framesForwardKinematics(full, data, np.concatenate([q, [0.02, 0.02]]))
+    for frame in ("panda_leftfinger", "panda_rightfinger", "panda_hand"):
+        panda.fk(q)
+        mine = panda.data.oMf[panda.model.getFrameId(frame)]
+        pin.updateFramePlacements(panda.model, panda.data)
+        mine = panda.data.oMf[panda.model.getFrameId(frame)]
+        assert np.allclose(mine.homogeneous, data.oMf[full.getFrameId(frame)].homogeneous, atol=1e-15), frame
+    # the fingers' masses ride on the hand: the reduced model weighs the same
+    assert sum(i.mass for i in panda.model.inertias) == pytest.approx(sum(i.mass for i in full.inertias), rel=1e-14)
+
+
+@pytest.mark.parametrize("locked, message", [
+    ({"panda_thumb": 0.02}, r"joints.locked.panda_thumb: no joint 'panda_thumb' in panda.urdf \(its joints: panda_joint1"),
+    ({"panda_finger_joint1": 0.05, "panda_finger_joint2": 0.02}, r"joints.locked.panda_finger_joint1: 0.05 lies outside the joint's limits \[0, 0.04\]"),
+])
+def test_a_locked_joint_must_exist_and_lie_within_its_limits(copy_robot, locked, message):
+    path = copy_robot("panda", lambda d: set_key(d, "joints.locked", locked))
+    with pytest.raises(ValueError, match=message):
+        load_model(read(path))
+
+
+@pytest.mark.parametrize("robot", ["ur5", "panda"])
+def test_pose_jacobian_and_its_derivative_match_finite_differences(robot):
+    """Rows: the frame's world velocity, then its angular velocity about its own axes (the body
+    angular velocity log3(R(t-h)^T R(t+h)) / 2h); Jdot qd from the derivative of J qd."""
+    import pinocchio as pin
+    model = load_model(robot)
+    rng = np.random.default_rng(7)
+    q = model.configuration("home") + rng.normal(scale=0.2, size=model.n)
+    qd = rng.normal(size=model.n)
+    h = 1e-6
+    J = model.jacobian(q)
+    linear = (model.fk(q + h * qd) - model.fk(q - h * qd)) / (2 * h)
+    angular = pin.log3(model.rotation(q - h * qd).T @ model.rotation(q + h * qd)) / (2 * h)
+    assert np.allclose(J @ qd, np.concatenate([linear, angular]), atol=1e-8)
+    jdot = (model.jacobian(q + h * qd) - model.jacobian(q - h * qd)) @ qd / (2 * h)
+    assert np.allclose(model.jdot_qdot(q, qd), jdot, atol=1e-7)
+    derivative = (model.jacobian(q + h * qd) - model.jacobian(q - h * qd)) / (2 * h)
+    assert np.allclose(model.jacobian_derivative(q, qd), derivative, atol=1e-8)
+    assert np.allclose(model.jacobian_derivative(q, qd) @ qd, model.jdot_qdot(q, qd), atol=1e-12)
+    position, rotation, full = model.kinematics(q)
+    assert np.allclose(position, model.fk(q), atol=0) and np.allclose(rotation, model.rotation(q), atol=0)
+    assert np.allclose(full, J, atol=1e-15)
+
+
+def test_a_continuous_joint_is_an_unbounded_revolute_joint_with_an_angle_on_the_ports(copy_robot):
+    """The same arm with joint2 continuous: one coordinate (an angle, not Pinocchio's cos/sin
+    pair), no position limits, the URDF's velocity and effort limits, and the same kinematics and
+    dynamics at angles beyond the revolute joint's old range."""
+    real = load_model("rrp")
+    continuous = load_model(_edited_rrp(copy_robot, '<joint name="joint2" type="revolute">',
+                                        '<joint name="joint2" type="continuous">'))
+    assert continuous.n == real.n == continuous.model.nq
+    lower, upper = continuous.position_limits()
+    assert (lower[1], upper[1]) == (-np.inf, np.inf)
+    assert lower[[0, 2]].tolist() == real.position_limits()[0][[0, 2]].tolist()
+    assert continuous.velocity_limits().tolist() == real.velocity_limits().tolist()
+    assert continuous.effort_limits().tolist() == real.effort_limits().tolist()
+    q = np.array([0.3, 2.5, 0.1])                            # joint2 beyond its old pi/2
+    qd = np.array([0.2, -0.4, 0.05])
+    assert np.allclose(continuous.fk(q), real.fk(q), atol=1e-15)
+    assert np.allclose(continuous.mass_matrix(q), real.mass_matrix(q), atol=1e-15)
+    assert np.allclose(continuous.nonlinear_effects(q, qd), real.nonlinear_effects(q, qd), atol=1e-14)
+    # a full turn is the same pose (an angle, not clipped or wrapped)
+    assert np.allclose(continuous.fk(q + [0, 2 * np.pi, 0]), real.fk(q), atol=1e-14)
+
+
+def _unlocked_panda(copy_robot, locked):
+    def edit(d):
+        d["joints"]["locked"] = locked
+        home = d["configurations"]["home"] + ([] if locked else [0.02])     # finger 2 follows finger 1
+        d["configurations"] = {"home": home}
+    return read(copy_robot("panda", edit))
+
+
+def test_a_mimic_joint_moves_with_its_leader(copy_robot):
+    """The Panda with its fingers free: panda_finger_joint2 mimics panda_finger_joint1
+    (multiplier 1), so the arm has 8 coordinates, not 9. Against the URDF read with the mimic
+    ignored (9 coordinates) and the constraint q9 = q8 imposed by hand (q_full = S q):
+    M = S^T M_full S, N = S^T N_full, the energies equal, and the forward dynamics solve M qdd = tau - N."""
+    import pinocchio as pin
+    model = load_model(_unlocked_panda(copy_robot, {}))
+    assert model.n == 8 and model.joint_names[-1] == "panda_finger_joint1" and model.prismatic[-1]
+    full = pin.buildModelFromUrdf(str(model.description.urdf))
+    data = full.createData()
+    S = np.zeros((9, 8))
+    S[:8, :8] = np.eye(8)
+    S[8, 7] = 1.0
+    rng = np.random.default_rng(3)
+    q = np.concatenate([model.configuration("home")[:7] + rng.normal(scale=0.1, size=7), [0.015]])
+    qd, tau = rng.normal(size=8), rng.normal(size=8)
+    M_full = pin.crba(full, data, S @ q)
+    M_full = np.triu(M_full) + np.triu(M_full, 1).T
+    assert np.allclose(model.mass_matrix(q), S.T @ M_full @ S, atol=1e-12)
+    N_full = pin.nonLinearEffects(full, data, S @ q, S @ qd)
+    assert np.allclose(model.nonlinear_effects(q, qd), S.T @ N_full, atol=1e-12)
+    assert model.kinetic_energy(q, qd) == pytest.approx(pin.computeKineticEnergy(full, data, S @ q, S @ qd), rel=1e-12)
+    assert model.potential_energy(q) == pytest.approx(pin.computePotentialEnergy(full, data, S @ q), rel=1e-12)
+    qdd = model.forward_dynamics(q, qd, tau)
+    assert np.allclose(model.mass_matrix(q) @ qdd, tau - model.nonlinear_effects(q, qd), atol=1e-10)
+    assert model.forward_dynamics_floats(q, qd, tau) == pytest.approx(qdd.tolist(), abs=1e-12)
+
+
+def test_a_mimic_joint_whose_leader_is_locked_must_be_locked_too(copy_robot):
+    description = _unlocked_panda(copy_robot, {"panda_finger_joint1": 0.02})
+    with pytest.raises(ValueError, match="joints.locked: joint 'panda_finger_joint2' mimics the locked joint "
+                                         "'panda_finger_joint1': lock it too"):
         load_model(description)

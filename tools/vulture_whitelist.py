@@ -6,11 +6,11 @@ finding. (Not a module anyone imports; ruff skips it.)
 """
 # Blocks register by (kind, variant) in Block.__init_subclass__; made by kind, never by class name.
 ControllerBlock, FKBlock, IKBlock, JacobianBlock, PlantBlock
-WaypointsBlock, LineBlock, JointBangBangBlock, CircleBlock
+WaypointsBlock, LineBlock, JointBangBangBlock, CircleBlock, PoseLineBlock
 abstract                # Block.__init_subclass__: a class setting it registers nothing
 
 # IK solvers register by name in their family's registry (the robot description names one).
-PitchElbowIK, SphericalIK, PlanarElbowIK, OffsetRRPIK, Planar3RRPIK, NewtonRaphsonIK
+PitchElbowIK, SphericalIK, PlanarElbowIK, OffsetRRPIK, Planar3RRPIK, NewtonRaphsonIK, DampedLeastSquaresIK
 
 # pythonfmu's Fmi2Slave reads these (model description) and calls these (FMU state hooks).
 author, default_experiment

@@ -9,8 +9,13 @@ position inputs q_ref and q start at the robot's home configuration (the rest at
 controller holds home with tau = g(home). For a robot
 with a payload the model carries ``payload_mass`` while ``grip`` is true (0 by default: the
 controller does not know the payload).
+Where the robot description asks for it (``[joints] saturate_effort = true``), tau is clipped to
+the joints' effort limits and the output ``saturated`` is true while any joint is clipped (one
+warning per excursion, naming the joint and the time).
 """
 from __future__ import annotations
+
+import numpy as np
 
 from ..control import GAINS, ComputedTorque
 from .base import ContinuousBlock, vector_names
@@ -47,6 +52,10 @@ class ControllerBlock(ContinuousBlock):
         self.tau = self.reals("tau", n, "output", robot.effort_units(),
                               "Joint {i} actuator effort (torque, or force for a prismatic joint)",
                               depends=inputs)
+        self.saturates = d.saturate_effort
+        if self.saturates:
+            self.saturated = self.boolean("saturated", "output", "True while an effort is clipped to its "
+                                          "joint's effort limit", depends=inputs)
         self.law = None
 
     def configure(self):
@@ -58,12 +67,28 @@ class ControllerBlock(ContinuousBlock):
         v = self.values                          # views, made once (the values array is never replaced)
         self._inputs = tuple(v[s] for s in (self.q_ref, self.qd_ref, self.qdd_ref, self.q, self.qd))
         self._tau_out = v[self.tau]
+        self._effort = self.robot.effort_limits()
+        self._clipping = False
         super().configure()
 
     def output(self, t):
         if self.has_payload:
             self.robot.set_payload(self.payload_mass if self.values[self.grip] else 0.0)
         self.law.torque_into(*self._inputs, self._tau_out)
+        if self.saturates:
+            self._saturate(t)
+
+    def _saturate(self, t):
+        tau, limit = self._tau_out, self._effort
+        clipped = bool((abs(tau) > limit).any())
+        if clipped and not self._clipping:
+            j = int(np.argmax(abs(tau) / limit))
+            unit = self.robot.effort_units()[j]
+            self.warn(f"t = {t:.9g} s: joint {j + 1} ({self.robot.joint_names[j]}) effort {tau[j]:.6g} {unit} "
+                      f"exceeds its limit {limit[j]:.6g} {unit}: clipped")
+        np.clip(tau, -limit, limit, out=tau)
+        self.values[self.saturated] = clipped
+        self._clipping = clipped
 
     def advance(self, t, h):
         q_ref, _, _, q, _ = self._inputs

@@ -6,17 +6,28 @@ too close to a singularity and counts as not reachable. Outside the workspace (o
 logged per excursion, and the block holds its last valid position with zero velocity and
 acceleration (zeros before it has one).
 
-An iterative solver (Newton-Raphson) starts each communication step from the solution of the
-last completed step (warm start; the first from its ``q_guess``), so that the outputs at a
-communication point depend on the inputs and the state at the step's start only, however often
-they are evaluated. Its diagnostics (``iterations``, ``residual``) are outputs too.
+An iterative solver (Newton-Raphson, damped least squares) starts each communication step from
+the solution of the last completed step (warm start, carried forward by its rates where the solver
+predicts; the first from its ``q_guess``), so that the outputs at a communication point depend on
+the inputs and the state at the step's start only, however often they are evaluated. Its
+diagnostics (``iterations``, ``residual``, ...) are outputs too.
+
+A pose task (the robot's ``[task] orientation_axes``) adds the inputs ``quat_ref[1..4]``, the
+target orientation of the task frame as a unit quaternion in the order (x, y, z, w) (scalar last,
+frame to world; normalised, refused if its norm is not 1 within 1e-6), ``omega_ref[1..3]`` and
+``omegad_ref[1..3]``, its angular velocity (rad/s) and acceleration (rad/s^2) in the world frame.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..ik import Unreachable, solver_class
+from ..orientation import quaternion_of
+from ..ik import JOINT_UNIT, Unreachable, solver_class
 from .base import Block, vector_names
+
+
+#: qd_limit's start for a joint without a velocity limit (rad/s, m/s): a parameter is finite.
+NO_RATE_LIMIT = 1e12
 
 
 class IKBlock(Block):
@@ -45,6 +56,8 @@ class IKBlock(Block):
                     self.table_error("ik", p.name, f"no configuration {start!r} (described: "
                                      f"{', '.join(self.description.configurations)})")
                 start = robot.configuration(start)
+            if len(start) == 1:                  # one number: the same for every joint
+                start = [start[0]] * robot.n
             if len(start) != robot.n:
                 self.table_error("ik", p.name, f"needs {robot.n} values (one per joint), got {len(start)}")
             self.reals(p.name, robot.n, "parameter", robot.joint_units(0),
@@ -52,7 +65,7 @@ class IKBlock(Block):
         self.reals("qd_limit", robot.n, "parameter", robot.joint_units(1),
                    "Joint {i}: the largest rate the IK passes on (default: the URDF's velocity limit); "
                    "a target needing more is too close to a singularity and counts as not reachable",
-                   starts=robot.velocity_limits())
+                   starts=np.minimum(robot.velocity_limits(), NO_RATE_LIMIT))
         coords, m, n = robot.task_coordinates, robot.m, robot.n
         start = robot.fk(robot.configuration("home"))
         xs, xds, xdds = (vector_names(b, m) for b in ("x_ref", "xd_ref", "xdd_ref"))
@@ -62,6 +75,21 @@ class IKBlock(Block):
                              lambda i: f"Target task velocity along {coords[i - 1]}")
         self.xdd = self.reals("xdd_ref", m, "input", robot.task_units(2),
                               lambda i: f"Target task acceleration along {coords[i - 1]}")
+        if robot.orientation_axes:
+            frame = self.description.task.frame
+            self.quaternion = self.reals("quat_ref", 4, "input", "1",
+                                         lambda i: f"Target orientation of frame {frame}: unit quaternion "
+                                                   f"component {'xyzw'[i - 1]} (x, y, z, w; frame to world)",
+                                         starts=quaternion_of(robot.rotation(robot.configuration("home"))))
+            self.omega = self.reals("omega_ref", 3, "input", "rad/s",
+                                    lambda i: f"Target angular velocity of frame {frame} about world axis "
+                                              f"{'xyz'[i - 1]}")
+            self.omegad = self.reals("omegad_ref", 3, "input", "rad/s2",
+                                     lambda i: f"Target angular acceleration of frame {frame} about world axis "
+                                               f"{'xyz'[i - 1]}")
+            xs = xs + vector_names("quat_ref", 4)
+            xds = xds + vector_names("omega_ref", 3)
+            xdds = xdds + vector_names("omegad_ref", 3)
         self.q = self.reals("q_ref", n, "output", robot.joint_units(0), "Joint {i} reference position",
                             depends=xs)
         self.qd = self.reals("qd_ref", n, "output", robot.joint_units(1), "Joint {i} reference velocity",
@@ -70,11 +98,15 @@ class IKBlock(Block):
                               "Joint {i} reference acceleration", depends=xs + xds + xdds)
         self.reachable = self.boolean("reachable", "output", "False while the target lies outside the "
                                       "workspace or at a singularity (last valid solution held)", depends=xs)
-        self.diagnostics = [(d.name, self.real(d.name, "output", d.unit, d.description, depends=xs))
+        joints = set(robot.joint_units(0))
+        joint_unit = joints.pop() if len(joints) == 1 else "1"      # a diagnostic in joint units
+        self.diagnostics = [(d.name, self.real(d.name, "output", joint_unit if d.unit == JOINT_UNIT else d.unit,
+                                               d.description, depends=xs))
                             for d in self.solver_type.diagnostics]
-        self.last = None          # last valid joint position
-        self.committed = None     # the last valid position at the end of the last completed step
+        self.last = None          # last valid joint position, velocity, acceleration and time
+        self.committed = None     # the last valid solution at the end of the last completed step
         self.outside = False      # in an excursion (warned once per excursion)
+        self.reason = ""          # why the last target was not reachable
 
     def configure(self):
         values = {p.name: self.parameter(p.name) if p.size is None else tuple(self.finite_vector(p.name))
@@ -86,13 +118,19 @@ class IKBlock(Block):
         self.outside = False
         v = self.values                          # views, made once (the values array is never replaced)
         self._targets = (v[self.x], v[self.xd], v[self.xdd])
+        if self.robot.orientation_axes:
+            self._targets += (v[self.quaternion], v[self.omega], v[self.omegad])
         self._outputs = (v[self.q], v[self.qd], v[self.qdd])
         self._limits = self.qd_limit.tolist()
         super().configure()
 
     def output(self, t):
         v = self.values
-        self.solver.start_from(self.committed)
+        if self.committed is None:
+            self.solver.start_from(None)
+        else:
+            q, qd, qdd, when = self.committed
+            self.solver.start_from(q, qd, qdd, t - when)
         try:
             try:
                 q, qd, qdd = self.solver.solve(*self._targets)
@@ -106,19 +144,20 @@ class IKBlock(Block):
                                       f"{qd[fastest]:.6g} exceeds qd_limit[{fastest + 1}] = "
                                       f"{self.qd_limit[fastest]:g} at q = {np.round(q, 6).tolist()}")
         except Unreachable as exc:
+            self.reason = str(exc)
             if not self.outside:
                 held = ("holding the last valid solution" if self.last is not None else
                         "no valid solution yet: outputs zero")
                 self.warn(f"t = {t:.9g} s: {exc}; {held}")
                 self.outside = True
             v[self.reachable] = 0.0
-            v[self.q] = 0.0 if self.last is None else self.last
+            v[self.q] = 0.0 if self.last is None else self.last[0]
             v[self.qd] = 0.0
             v[self.qdd] = 0.0
             return
         v[self.reachable] = 1.0
         self.outside = False
-        self.last = q
+        self.last = (q, qd, qdd, t)
         q_out, qd_out, qdd_out = self._outputs
         q_out[:], qd_out[:], qdd_out[:] = q, qd, qdd
 
@@ -129,10 +168,21 @@ class IKBlock(Block):
         return {"last": _listed(self.last), "committed": _listed(self.committed), "outside": self.outside}
 
     def set_internal_state(self, state):
-        self.last = None if state["last"] is None else np.array(state["last"])
-        self.committed = None if state["committed"] is None else np.array(state["committed"])
+        self.last = _solution(state["last"])
+        self.committed = _solution(state["committed"])
         self.outside = bool(state["outside"])
 
 
-def _listed(q):
-    return None if q is None else [float(x) for x in q]
+def _listed(solution):
+    """A solution (q, qd, qdd, t) as plain lists and a float (FMU state), or None."""
+    if solution is None:
+        return None
+    q, qd, qdd, t = solution
+    return [[float(x) for x in q], [float(x) for x in qd], [float(x) for x in qdd], float(t)]
+
+
+def _solution(listed):
+    if listed is None:
+        return None
+    q, qd, qdd, t = listed
+    return np.array(q), np.array(qd), np.array(qdd), float(t)

@@ -8,6 +8,10 @@ mechanism in actuated coordinates) gets an extra input ``f_ext[i]``, one compone
 coordinate (a force in N along a length coordinate, a moment in N.m about an angle one), held
 over the step like tau and passed to the model's ``forward_dynamics(q, qd, tau, f_ext)``, and
 extra outputs ``x[i]``: the task coordinates (pose) of the state, FK(q).
+
+``within_limits`` is false while a joint's position or velocity lies beyond its limit (the
+robot's: the URDF's or its description's); each excursion logs one warning naming the joint, the
+limit and the time.
 """
 from __future__ import annotations
 
@@ -61,6 +65,9 @@ class PlantBlock(ContinuousBlock):
                             initial_depends=lambda i: [f"q0[{i}]"])
         self.qd = self.reals("qd", n, "output", u1, "Joint {i} velocity", depends=[],
                              initial_depends=lambda i: [f"qd0[{i}]"])
+        self.within = self.boolean("within_limits", "output", "False while a joint's position or velocity "
+                                   "lies beyond its limit (a warning names joint, limit and time)", start=True,
+                                   depends=[])
         if self.has_wrench:
             coords = robot.task_coordinates
             self.x = self.reals("x", robot.m, "output", robot.task_units(0),
@@ -80,6 +87,10 @@ class PlantBlock(ContinuousBlock):
         self._wrench_in = v[self.f_ext] if self.has_wrench else None
         contiguous = self.q.stop == self.qd.start
         self._state_out = v[self.q.start:self.qd.stop] if contiguous else None
+        lower, upper = self.robot.position_limits()
+        speed = self.robot.velocity_limits()
+        self._limits = (np.concatenate([lower, -speed]), np.concatenate([upper, speed]))
+        self._beyond = False
         super().configure()
 
     def _grip(self):
@@ -98,6 +109,27 @@ class PlantBlock(ContinuousBlock):
             self.values[self.q], self.values[self.qd] = self.plant.q, self.plant.qd
         if self.has_wrench:
             self.values[self.x] = self.robot.fk(self.plant.q)
+        lower, upper = self._limits
+        x = self.plant.x
+        beyond = bool((x < lower).any() or (x > upper).any())
+        self.values[self.within] = not beyond
+        if beyond and not self._beyond:
+            self.warn(f"t = {t:.9g} s: {self._violation(x)}")
+        self._beyond = beyond
+
+    def _violation(self, x) -> str:
+        """Which joint is beyond which limit, in words (the first found)."""
+        robot, n = self.robot, self.robot.n
+        lower, upper = self._limits
+        k = int(np.flatnonzero((x < lower) | (x > upper))[0])
+        j = k % n
+        what, units = ("position", robot.joint_units(0)) if k < n else ("velocity", robot.joint_units(1))
+        if k >= n:
+            return (f"joint {j + 1} ({robot.joint_names[j]}) velocity {x[k]:.6g} {units[j]} exceeds its limit "
+                    f"{upper[k]:.6g} {units[j]}")
+        side, limit = ("below its lower", lower[k]) if x[k] < lower[k] else ("above its upper", upper[k])
+        return (f"joint {j + 1} ({robot.joint_names[j]}) position {x[k]:.9g} {units[j]} is {abs(x[k] - limit):.3g} "
+                f"{units[j]} {side} limit {limit:.6g} {units[j]}")
 
     def advance(self, t, h):
         substeps = math.ceil(h / self.plant.max_substep - 1e-9)
@@ -113,12 +145,13 @@ class PlantBlock(ContinuousBlock):
     def internal_state(self):
         if self.plant is None:
             return {}
-        return {"x": [float(v) for v in self.plant.x], "grip": self.plant.grip}
+        return {"x": [float(v) for v in self.plant.x], "grip": self.plant.grip, "beyond": self._beyond}
 
     def set_internal_state(self, state):
         if self.plant is not None and state:
             self.plant.x = np.array(state["x"])
             self.plant.set_grip(state["grip"])
+            self._beyond = bool(state.get("beyond", False))
 
     def continuous_state(self):
         return self.plant.x.copy()

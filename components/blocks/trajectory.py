@@ -4,15 +4,18 @@
 ``line``: task space, a straight line at minimum time with a trapezoidal speed;
 ``joint_bangbang``: joint space, the synchronized minimum-time bang-bang;
 ``circle``: task space, once round a circle in the first two task coordinates with an LSPB
-phase (further task coordinates offset + amplitude sin phi).
+phase (further task coordinates offset + amplitude sin phi);
+``pose_line``: a pose task, the frame's origin on a straight line and its orientation by slerp
+(shortest rotation), on one LSPB time law.
 Outputs at time t belong to t; no inputs.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..orientation import COMPONENTS, quaternion_of
 from ..parameters import Parameter
-from ..trajectory import Circle, StraightLine, SynchronizedBangBang, WaypointTrajectory
+from ..trajectory import Circle, PoseLine, StraightLine, SynchronizedBangBang, WaypointTrajectory
 from .base import Block
 from .text import format_matrix, format_vector, parse_matrix, parse_vector
 
@@ -24,6 +27,8 @@ class _Reference(Block):
     summary = "reference profile"
     abstract = True
     profile = None
+    #: What the profile's outputs are, in the order of ``evaluate``.
+    quantities = ("position", "velocity", "acceleration")
 
     def declare_outputs(self, bases, units, describe):
         n = len(units[0])
@@ -54,7 +59,7 @@ class _Reference(Block):
         for t in times:
             with np.errstate(all="ignore"):
                 values = self.profile.evaluate(float(t))
-            for what, value in zip(("position", "velocity", "acceleration"), values):
+            for what, value in zip(self.quantities, values):
                 if not np.all(np.isfinite(value)):
                     raise ValueError(f"the parameters ({', '.join(self.parameter_names())}) give a non-finite "
                                      f"reference {what} at t = {t:g} s ({np.asarray(value).tolist()})")
@@ -255,4 +260,75 @@ class CircleBlock(_Reference):
                               self.parameter("cruise_factor"),
                               self.finite_vector("offset") if extra else (),
                               self.finite_vector("amplitude") if extra else ())
+        super().configure()
+
+
+class PoseLineBlock(_Reference):
+    variant = "pose_line"
+    summary = ("pose reference: the task frame's origin on a straight line by displacement, its orientation "
+               "turning by rotation (about its own start axes, shortest rotation: slerp), both on one LSPB time "
+               "law of duration, then at rest; orientation as a unit quaternion (x, y, z, w), angular rates in "
+               "the world frame; outputs at time t belong to t")
+    quantities = ("position", "velocity", "acceleration", "orientation", "angular velocity",
+                  "angular acceleration")
+    scalars = (
+        Parameter("duration", "Real", "s", "Duration of the move", None, above=0.0),
+        Parameter("cruise_factor", "Real", "1", "Cruise speed over the move's mean speed, in (1, 2]", 1.5,
+                  above=1.0, high=2.0),
+    )
+
+    def declare(self):
+        robot, task = self.robot, self.description.task
+        if not task.is_pose or list(task.axes) != [0, 1, 2]:
+            self.table_error("trajectory", "profile", "pose_line needs a pose task: [task] with the three "
+                             "world axes of the position and orientation_axes")
+        frame = task.frame
+        given = dict(self.description.trajectory.parameters)
+        named = given.pop("start_configuration", "home")
+        if named not in self.description.configurations:
+            self.table_error("trajectory", "start_configuration", f"no configuration {named!r} (described: "
+                             f"{', '.join(self.description.configurations)})")
+        q = robot.configuration(named)
+        defaults = {"start": robot.fk(q).tolist(), "start_quaternion": quaternion_of(robot.rotation(q))}
+        for key, length in (("start", 3), ("start_quaternion", 4), ("displacement", 3), ("rotation", 3)):
+            value = given.pop(key, defaults.get(key))
+            if value is None:
+                self.table_error("trajectory", key, "missing")
+            if not isinstance(value, list) or len(value) != length:
+                self.table_error("trajectory", key, f"needs {length} values, got {value!r}")
+            given[f"_{key}"] = value
+        values = self.table_values("trajectory", self.scalars,
+                                   {k: v for k, v in given.items() if not k.startswith("_")})
+        axis = lambda i: "xyz"[i - 1]
+        self.reals("start", 3, "parameter", "m", lambda i: f"Start position of frame {frame}, world {axis(i)} "
+                   f"(default: at configuration {named!r})", given["_start"])
+        self.reals("start_quaternion", 4, "parameter", "1",
+                   lambda i: f"Start orientation of frame {frame}: unit quaternion component {COMPONENTS[i - 1]} "
+                             f"(x, y, z, w; frame to world; default: at configuration {named!r})",
+                   given["_start_quaternion"])
+        self.reals("displacement", 3, "parameter", "m", lambda i: f"Displacement of the origin, world {axis(i)}",
+                   given["_displacement"])
+        self.reals("rotation", 3, "parameter", "rad",
+                   lambda i: f"Rotation vector (axis times angle, at most pi) about the start frame's own "
+                             f"axis {axis(i)}", given["_rotation"])
+        for p in self.scalars:
+            self.declare_parameter(p, values[p.name])
+        out = []
+        for base, unit, what in (("x_ref", "m", "position"), ("xd_ref", "m/s", "velocity"),
+                                 ("xdd_ref", "m/s2", "acceleration")):
+            out.append(self.reals(base, 3, "output", unit, lambda i, w=what: f"Reference {w} of frame {frame}, "
+                                  f"world {axis(i)}", depends=[]))
+        out.append(self.reals("quat_ref", 4, "output", "1",
+                              lambda i: f"Reference orientation of frame {frame}: unit quaternion component "
+                                        f"{COMPONENTS[i - 1]} (x, y, z, w; frame to world)", depends=[]))
+        for base, unit, what in (("omega_ref", "rad/s", "angular velocity"),
+                                 ("omegad_ref", "rad/s2", "angular acceleration")):
+            out.append(self.reals(base, 3, "output", unit, lambda i, w=what: f"Reference {w} of frame {frame} "
+                                  f"about world {axis(i)}", depends=[]))
+        self.outputs = out
+
+    def configure(self):
+        self.profile = PoseLine(self.finite_vector("start"), self.finite_vector("displacement"),
+                                self.finite_vector("start_quaternion"), self.finite_vector("rotation"),
+                                self.parameter("duration"), self.parameter("cruise_factor"))
         super().configure()

@@ -29,7 +29,7 @@ from xml.etree.ElementTree import Element
 from pythonfmu import Fmi2Slave
 from pythonfmu.default_experiment import DefaultExperiment
 
-from .. import SOURCE_HASH, STEP_SIZE, check_bundle
+from .. import SOURCE_HASH, STEP_SIZE, check_bundle, robot_data_hash
 from ..blocks import block_type
 from ..robots import load_description, load_model
 from ..robots.description import read
@@ -42,7 +42,18 @@ from .pythonfmu_workarounds import balance_pythonfmu_refcount, guard_entry_point
 from .reporting import Reporting, behind_robofmu_library
 from .variables import Variables
 
-__all__ = ["BlockSlave"]
+__all__ = ["BlockSlave", "ROBOT_FOLDER", "fmu_version"]
+
+#: The folder of a FMU's ``resources`` that holds its robot's data (``<robot>.toml``, ``<robot>.urdf``).
+ROBOT_FOLDER = "robot"
+
+
+def fmu_version(robofmu_version: str, robot_data: str) -> str:
+    """A FMU's model-description ``version``: ``<robofmu version>+<code hash>.<robot data hash>``
+    (the first 12 hex digits of :data:`~robofmu.components.SOURCE_HASH`, the first 8 of the
+    robot's :func:`~robofmu.components.robot_data_hash`; a PEP 440 local version), so it changes
+    with robofmu's version, its code and the FMU's own robot's data, and with nothing else."""
+    return f"{robofmu_version}+{SOURCE_HASH[:12]}.{robot_data[:8]}"
 
 
 @functools.lru_cache(maxsize=None)
@@ -75,10 +86,11 @@ class BlockSlave(FastPath, LifeCycle, Outputs, FmuState, Variables, Reporting, F
         if not self.robot_name or not self.block_kind:
             raise TypeError(f"{type(self).__name__}: robot_name and block_kind must be set")
         description = self._own_description()
+        self.robot_data = robot_data_hash(description.path, description.urdf)
         self.logic = block_type(description, self.block_kind)(load_model(description))
         self.logic.logger = self._log_from_block
         self.author = "robofmu"
-        self.version = f"{self.robofmu_version or _installed_version()}+{SOURCE_HASH[:12]}"
+        self.version = fmu_version(self.robofmu_version or _installed_version(), self.robot_data)
         self.description = (f"robofmu {self.block_kind} block of robot '{self.robot_name}': {self.logic.summary}. "
                             f"Runs in Python {PYTHON} with the packages of resources/requirements.txt")
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=self.logic.nominal_stop_time(),
@@ -97,20 +109,26 @@ class BlockSlave(FastPath, LifeCycle, Outputs, FmuState, Variables, Reporting, F
             self.fast_path = self._register_fast_path()       # last: the instance is complete
 
     def _own_description(self):
-        """The robot's description from this FMU's own resources folder.
+        """The robot's description from this FMU's own resources folder: ``resources/robot/``
+        holds the robot's TOML as ``<robot>.toml`` and, for a URDF robot, the URDF it resolved
+        to at build as ``<robot>.urdf`` (wherever it was: beside the TOML, or in an installed
+        distribution), so the FMU needs neither the robot's folder nor that distribution.
 
         All pythonfmu FMUs of a process share one interpreter, so the robofmu package is the one
         imported first, perhaps from another FMU's extraction folder that its importer has since
-        deleted. Robot data (TOML, URDF) is therefore read from this instance's own folder, which
-        lives as long as the instance."""
+        deleted; the bundled package holds no robot's data anyway. Robot data is therefore read
+        from this instance's own folder, which lives as long as the instance. A slave made
+        outside a FMU (no resources) reads the package's robot of its name."""
         if not self.resources:
             return load_description(self.robot_name)
-        return read(Path(self.resources) / "robofmu" / "components" / "robots" / self.robot_name
-                    / f"{self.robot_name}.toml")
+        folder = Path(self.resources) / ROBOT_FOLDER
+        urdf = folder / f"{self.robot_name}.urdf"
+        return read(folder / f"{self.robot_name}.toml", urdf=urdf if urdf.is_file() else None)
 
     def to_xml(self, model_options=dict()) -> Element:
         """pythonfmu's model description, completed (see :mod:`.model_description`)."""
-        return complete(super().to_xml(model_options), self.logic, self.robot_name, self.block_kind)
+        return complete(super().to_xml(model_options), self.logic, self.robot_name, self.block_kind,
+                        self.robot_data)
 
 
 guard_entry_points(BlockSlave)

@@ -8,8 +8,9 @@ used) would be looked up in that folder, which its importer may have deleted sin
 every run): a FMU of another robot family then fails with ``No module named
 'robofmu.components.robots.serial'``. The generated FMU script (``robofmu build``) calls
 :func:`import_all` before anything else of the package, so every module is imported while that
-folder exists, and no FMU reads a file of another FMU's extraction folder later. Robot data is
-read from each instance's own folder (``BlockSlave._own_description``).
+folder exists, and no FMU reads a file of another FMU's extraction folder later. The bundle is
+code only (:func:`robofmu.components.code_files`: no robot's data folder); robot data is read
+from each instance's own folder, ``resources/robot/`` (``BlockSlave._own_description``).
 
 Importing every module has no side effect but definitions (a few hundredths of a second once per
 process); later calls return at once.

@@ -35,8 +35,13 @@ UNITS = {
 VENDOR_TOOL = "robofmu"
 
 
-def complete(root: Element, logic, robot: str, kind: str) -> Element:
-    """Complete pythonfmu's ``root`` for block ``logic`` (a :class:`~robofmu.components.blocks.Block`)."""
+def complete(root: Element, logic, robot: str, kind: str, robot_data: str = "") -> Element:
+    """Complete pythonfmu's ``root`` for block ``logic`` (a :class:`~robofmu.components.blocks.Block`).
+
+    The vendor annotation names robot, kind and variant, the code's hash (``source``:
+    :data:`~robofmu.components.SOURCE_HASH`) and the hash of the robot's data the FMU carries
+    (``robot_data``: :func:`~robofmu.components.robot_data_hash`), what ``robofmu build`` and
+    the master compare to tell a stale FMU and why."""
     meta = {v.name: v for v in logic.variables}
     used = sorted({v.unit for v in meta.values() if v.unit})
     units = Element("UnitDefinitions")
@@ -48,7 +53,7 @@ def complete(root: Element, logic, robot: str, kind: str) -> Element:
     annotations = Element("VendorAnnotations")
     tool = SubElement(annotations, "Tool", name=VENDOR_TOOL)
     SubElement(tool, "Block", robot=robot, kind=kind, variant=logic.variant, source=SOURCE_HASH,
-               python=PYTHON, requirements="resources/requirements.txt")
+               robot_data=robot_data, python=PYTHON, requirements="resources/requirements.txt")
     root.insert([c.tag for c in root].index("ModelVariables"), annotations)
 
     index = {}

@@ -29,9 +29,14 @@ class Unreachable(ValueError):
     """The target lies outside the workspace of the solver's branch, or on a singularity."""
 
 
+#: A diagnostic's unit that is the joints' own (rad, m; "1" for a robot with both kinds).
+JOINT_UNIT = "joint"
+
+
 @dataclass(frozen=True)
 class Diagnostic:
-    """A number a solver reports about its last solve (the IK block makes it an output)."""
+    """A number a solver reports about its last solve (the IK block makes it an output); its
+    ``unit`` an SI unit or :data:`JOINT_UNIT`."""
 
     name: str
     unit: str
@@ -58,6 +63,9 @@ class IKSolver:
     kind: ClassVar[str] = ""
     parameters: ClassVar[tuple[Parameter, ...]] = ()
     diagnostics: ClassVar[tuple[Diagnostic, ...]] = ()
+    #: A square solver needs as many task coordinates and constraints as joints, and a position
+    #: task; a solver for any task/joint ratio and pose tasks sets False and overrides :meth:`solve`.
+    square: ClassVar[bool] = True
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -82,10 +90,16 @@ class IKSolver:
         self.constraint_values = np.zeros(0)
         self.report: dict[str, float] = {d.name: 0.0 for d in self.diagnostics}
         self.setup()
+        if not self.square:
+            return
+        if robot.orientation_axes:
+            raise ValueError(f"IK solver {self.kind!r} solves position tasks; robot {robot.description.name!r} "
+                             "tracks an orientation too (use a solver for pose tasks: damped_least_squares)")
         rows = robot.m + len(self.constraint_rows)
         if rows != robot.n or len(self.constraint_values) != len(self.constraint_rows):
             raise ValueError(f"IK solver {self.kind!r}: {robot.m} task coordinates and "
-                             f"{len(self.constraint_rows)} constraints for {robot.n} joints")
+                             f"{len(self.constraint_rows)} constraints for {robot.n} joints (a square "
+                             "solver; for other ratios use damped_least_squares)")
         n, m = robot.n, robot.m
         self._A = np.zeros((n, n))                 # A = [J; C]: the constraint rows set once
         self._A[m:] = self.constraint_rows
@@ -95,13 +109,16 @@ class IKSolver:
     def setup(self) -> None:
         """Read the parameters (``self.values``) and robot geometry; set ``constraint_rows``."""
 
-    def position(self, x: np.ndarray) -> np.ndarray:
-        """Joint positions (rad, m), shape (n,), placing the task point at ``x``; raises Unreachable."""
+    def position(self, x: np.ndarray, quaternion: np.ndarray | None = None) -> np.ndarray:
+        """Joint positions (rad, m), shape (n,), placing the task point at ``x`` (and, a solver of
+        pose tasks, the task frame's orientation at ``quaternion``, x, y, z, w); raises Unreachable."""
         raise NotImplementedError
 
-    def start_from(self, q: np.ndarray | None) -> None:
+    def start_from(self, q: np.ndarray | None, qd: np.ndarray | None = None, qdd: np.ndarray | None = None,
+                   elapsed: float = 0.0) -> None:
         """Where an iterative solver starts its next solve: ``q`` (a previous solution), or its
-        initial guess if None. Closed-form solvers ignore it."""
+        initial guess if None; ``qd``, ``qdd`` and ``elapsed`` (s) are that solution's rates and the
+        time since it, for a solver that predicts its start. Closed-form solvers ignore it."""
 
     def augmented_jacobian(self, q: np.ndarray) -> np.ndarray:
         """A(q) = [J(q); C], shape (n, n): a new array."""
@@ -134,13 +151,16 @@ class IKSolver:
             raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
         return qd, qdd
 
-    def solve(self, x, xd, xdd):
+    def solve(self, x, xd, xdd, quaternion=None, omega=None, omegad=None):
         """Joint position, velocity and acceleration for a task-space motion.
 
         Parameters
         ----------
         x, xd, xdd : array_like, shape (m,)
             Task position, velocity and acceleration (task units).
+        quaternion, omega, omegad : array_like, shapes (4,), (3,), (3,), optional
+            A pose task's orientation (unit quaternion x, y, z, w, frame to world), angular
+            velocity (rad/s) and acceleration (rad/s^2), both in the world frame.
 
         Returns
         -------

@@ -131,7 +131,7 @@ class NewtonRaphsonIK(IKSolver):
         self.history: list[float] = []          # |F| per iteration of the last solve (0: the start)
         self.iterates: list[np.ndarray] = []    # q per iteration of the last solve (0: the start)
 
-    def start_from(self, q):
+    def start_from(self, q, qd=None, qdd=None, elapsed=0.0):
         self.start = self.q_guess.copy() if q is None else np.array(q, dtype=float)
 
     def residual(self, q: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -9,7 +9,10 @@ Schema (every table but those marked optional is required)::
 
     name = "rrp"                         # the folder's name
     summary = "Spherical RRP arm (seed 000)"
-    urdf = "rrp.urdf"                    # relative to the TOML
+    urdf = "rrp.urdf"                    # relative to the TOML, or a file of an installed
+                                         # distribution: { distribution = "example-robot-data",
+                                         # path = "ur_description/urdf/ur5_robot.urdf" } (the one
+                                         # file of that distribution whose path ends so)
     blocks = ["trajectory", "ik", "controller", "plant", "fk"]
     default_gains = "pd"                 # the controller's start values: one of the [gains.*] sets
 
@@ -17,6 +20,16 @@ Schema (every table but those marked optional is required)::
     frame = "tcp"                        # URDF frame whose position is the task point
     coordinates = ["x", "y", "z"]        # names of the task coordinates
     axes = [0, 1, 2]                     # optional: which world axes of that position (default all)
+    orientation_axes = [0, 1, 2]         # optional: which of the frame's own axes of its orientation
+                                         # are tracked too (a pose task; default none: position only)
+
+    [joints]                             # optional
+    locked = { finger = 0.02 }           # joints held at a value (rad, m), removed from the model
+    saturate_effort = false              # the controller clips tau to the effort limits
+    [joints.limits.elbow]                # a joint's limits where the URDF has none (or others):
+    lower = -2.0                         # rad or m; upper too; velocity (rad/s, m/s); effort
+    velocity = 3.0                       # (N.m, N); inf: none. A URDF joint whose position
+                                         # limits are [0, 0] (its <limit> gives none) is unlimited
 
     [configurations]
     home = [0.0, 0.0, 0.125]             # joint positions (rad, m); `home` is required
@@ -96,7 +109,9 @@ class Gains:
 
 @dataclass(frozen=True)
 class TaskSpace:
-    """The task coordinates: components ``axes`` of the position of URDF frame ``frame``.
+    """The task coordinates: components ``axes`` of the position of URDF frame ``frame``, and, for a
+    pose task, the rotations about the frame's own axes ``orientation_axes`` (0, 1, 2: its x, y, z)
+    of its orientation (none: a position task).
 
     For a closed-chain mechanism ``frame`` names its task body (``end_effector``) and the
     coordinates are the mechanism's own (planar x, y along world axes 0, 1 and theta about
@@ -105,6 +120,12 @@ class TaskSpace:
     frame: str
     coordinates: tuple[str, ...]
     axes: tuple[int, ...]
+    orientation_axes: tuple[int, ...] = ()
+
+    @property
+    def is_pose(self) -> bool:
+        """Whether the task tracks an orientation too (ports ``quat``, ``omega``, ``omegad``)."""
+        return bool(self.orientation_axes)
 
 
 @dataclass(frozen=True)
@@ -205,6 +226,13 @@ class RobotDescription:
         without a trajectory block.
     ik : Choice or None
         IK solver and its parameters; None for robots without an IK block.
+    locked : dict of str to float
+        Joints of the URDF held at a value (rad, m) and removed from the model (``[joints] locked``).
+    joint_limits : dict of str to dict of str to float
+        Limits by joint that replace the URDF's (``[joints.limits.<joint>]``: ``lower``, ``upper``
+        (rad, m), ``velocity`` (rad/s, m/s), ``effort`` (N.m, N); inf: none).
+    saturate_effort : bool
+        Whether the controller clips its efforts to the effort limits.
     mechanism : Planar3RRPMechanism or None
         The closed-chain mechanism's parameters (``[mechanism]``); None for a URDF robot.
     """
@@ -224,6 +252,9 @@ class RobotDescription:
     trajectory: Choice | None
     ik: Choice | None
     mechanism: Planar3RRPMechanism | None = None
+    locked: dict[str, float] = field(default_factory=dict)
+    joint_limits: dict[str, dict[str, float]] = field(default_factory=dict)
+    saturate_effort: bool = False
 
     @property
     def model_kind(self) -> str:
@@ -366,8 +397,47 @@ def _choice(table: _Table, selector: str) -> Choice:
     return Choice(kind, {k: v for k, v in table.data.items() if k != selector})
 
 
-def read(path: str | Path) -> RobotDescription:
+def _distribution_file(table: _Table, reference: "_Table") -> Path:
+    """The one file of an installed distribution whose path ends with ``path``."""
+    from importlib import metadata
+
+    reference.unknown({"distribution", "path"})
+    name, tail = reference.string("distribution", _REQUIRED), reference.string("path", _REQUIRED)
+    try:
+        distribution = metadata.distribution(name)
+    except metadata.PackageNotFoundError:
+        table.fail("urdf", f"the distribution {name!r} is not installed (pip install {name})")
+    suffix = "/" + tail.strip("/")
+    found = [f for f in distribution.files or () if ("/" + str(f)).endswith(suffix)]
+    if len(found) != 1:
+        table.fail("urdf", f"the distribution {name!r} has {len(found)} files whose path ends with {tail!r}"
+                           + (f": {', '.join(map(str, found[:5]))}" if found else "") + "; exactly one is needed")
+    return Path(distribution.locate_file(found[0]))
+
+
+def _urdf(top: _Table, path: Path, urdf: Path | None) -> Path:
+    """The URDF file the description names (``urdf``, given: the caller's copy of it)."""
+    if urdf is not None:
+        urdf = Path(urdf)
+    elif isinstance(top.data.get("urdf"), dict):
+        urdf = _distribution_file(top, top.table("urdf", _REQUIRED))
+    else:
+        urdf = path.parent / top.string("urdf", _REQUIRED)
+    if not urdf.is_file():
+        top.fail("urdf", f"no such file {urdf}")
+    return urdf
+
+
+def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
     """Read and validate one description file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file.
+    urdf : str or Path, optional
+        A copy of the URDF to read instead of the one the ``urdf`` key names (an FMU carries its
+        robot's URDF in its own resources).
 
     Raises
     ------
@@ -383,16 +453,14 @@ def read(path: str | Path) -> RobotDescription:
         raise DescriptionError(path, "(syntax)", str(exc)) from None
     top = _Table(path, data)
     top.unknown({"name", "summary", "urdf", "mechanism", "blocks", "task", "configurations", "gravity",
-                 "payload", "gains", "default_gains", "trajectory", "ik"})
+                 "payload", "gains", "default_gains", "trajectory", "ik", "joints"})
     name = top.string("name", _REQUIRED)
     if name != path.stem:
         top.fail("name", f"must be the file's name {path.stem!r}, got {name!r}")
     mechanism = None
     mech = top.table("mechanism", None)
     if mech is None:
-        urdf = path.parent / top.string("urdf", _REQUIRED)
-        if not urdf.is_file():
-            top.fail("urdf", f"no such file {urdf}")
+        urdf = _urdf(top, path, urdf)
     else:
         if "urdf" in data:
             top.fail("mechanism", "a robot has either a `urdf` or a [mechanism] table, not both")
@@ -408,12 +476,16 @@ def read(path: str | Path) -> RobotDescription:
 
     task = top.table("task", _REQUIRED)
     if mechanism is None:
-        task.unknown({"frame", "coordinates", "axes"})
+        task.unknown({"frame", "coordinates", "axes", "orientation_axes"})
         coordinates = task.strings("coordinates", _REQUIRED)
-        axes = task.numbers("axes", list(range(len(coordinates))), length=len(coordinates))
-        if any(a not in (0.0, 1.0, 2.0) for a in axes) or len(set(axes)) != len(axes):
-            task.fail("axes", f"must be distinct world axes among 0, 1, 2, got {list(axes)}")
-        task_space = TaskSpace(task.string("frame", _REQUIRED), coordinates, tuple(int(a) for a in axes))
+        axes = _axes(task, "axes", list(range(len(coordinates))), "world axes")
+        if len(axes) != len(coordinates):
+            task.fail("axes", f"must have {len(coordinates)} values, got {len(axes)} (one per coordinate)")
+        orientation = _axes(task, "orientation_axes", [], "axes of the frame") if "orientation_axes" in task.data \
+            else ()
+        if "orientation_axes" in task.data and not orientation:
+            task.fail("orientation_axes", "must name at least one axis (leave the key out for a position task)")
+        task_space = TaskSpace(task.string("frame", _REQUIRED), coordinates, axes, orientation)
     else:                       # the mechanism's own task coordinates: planar x, y along world x, y,
         task.unknown({"frame", "coordinates"})                       # theta about world z
         coordinates = task.strings("coordinates", _REQUIRED)
@@ -467,9 +539,51 @@ def read(path: str | Path) -> RobotDescription:
     if ("ik" in blocks) != (ik is not None):
         top.fail("ik", "an [ik] table is needed exactly when `blocks` lists 'ik'")
 
+    locked, limits, saturate = {}, {}, False
+    joints = top.table("joints", None)
+    if joints is not None:
+        if mechanism is not None:
+            top.fail("joints", "a [mechanism] describes its joints in its own table")
+        joints.unknown({"locked", "limits", "saturate_effort"})
+        held = joints.table("locked", {})
+        locked = {joint: held.number(joint, _REQUIRED) for joint in held.data}
+        given = joints.table("limits", {})
+        for joint in given.data:
+            table = given.table(joint, _REQUIRED)
+            table.unknown(set(LIMIT_KEYS))
+            limits[joint] = {key: _limit(table, key) for key in LIMIT_KEYS if key in table.data}
+            low, high = limits[joint].get("lower", -math.inf), limits[joint].get("upper", math.inf)
+            if not low < high:
+                table.fail("upper", f"must exceed lower, got {high!r} <= {low!r}")
+        saturate = joints.data.get("saturate_effort", False)
+        if not isinstance(saturate, bool):
+            joints.fail("saturate_effort", f"must be true or false, got {saturate!r}")
+
     return RobotDescription(
         name=name, summary=top.string("summary", _REQUIRED), path=path, urdf=urdf, blocks=blocks,
         task=task_space, configurations=configurations, gravity=magnitude,
         gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
         trajectory=trajectory, ik=ik,
-        mechanism=mechanism)
+        mechanism=mechanism, locked=locked, joint_limits=limits, saturate_effort=saturate)
+
+
+#: The keys of a ``[joints.limits.<joint>]`` table.
+LIMIT_KEYS = ("lower", "upper", "velocity", "effort")
+
+
+def _limit(table: _Table, key: str) -> float:
+    """A limit: a number (inf: none); velocity and effort > 0."""
+    value = table._get(key, _REQUIRED)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+        table.fail(key, f"must be a number (inf: no limit), got {value!r}")
+    if key in ("velocity", "effort") and not value > 0.0:
+        table.fail(key, f"must be > 0 (inf: no limit), got {value!r}")
+    return float(value)
+
+
+def _axes(table: _Table, name: str, default, what: str) -> tuple[int, ...]:
+    """Distinct axes among 0, 1, 2."""
+    axes = table.numbers(name, default)
+    if any(a not in (0.0, 1.0, 2.0) for a in axes) or len(set(axes)) != len(axes):
+        table.fail(name, f"must be distinct {what} among 0, 1, 2, got {list(axes)}")
+    return tuple(int(a) for a in axes)

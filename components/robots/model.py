@@ -41,6 +41,14 @@ class RobotModel(ABC):
     m: int
     prismatic: list[bool]
     joint_names: list[str]
+    #: A pose task's rotations, about these axes of the task frame (0, 1, 2); none: a position task.
+    orientation_axes: tuple[int, ...] = ()
+
+    @property
+    def task_rows(self) -> int:
+        """Rows of the task velocity (and of :meth:`jacobian`): the m task coordinates' rates, then
+        one angular rate per orientation axis."""
+        return self.m + len(self.orientation_axes)
 
     # -- units and names ---------------------------------------------------------------------
     def joint_units(self, order: int = 0) -> list[str]:
@@ -73,7 +81,11 @@ class RobotModel(ABC):
 
     @abstractmethod
     def velocity_limits(self) -> np.ndarray:
-        """Joint velocity limits (rad/s, m/s), shape (n,)."""
+        """Joint velocity limits (rad/s, m/s), shape (n,) (inf where none)."""
+
+    def effort_limits(self) -> np.ndarray:
+        """Joint effort limits (N.m, N), shape (n,) (inf where none: the default)."""
+        return np.full(self.n, np.inf)
 
     # -- parameters ---------------------------------------------------------------------------
     @abstractmethod
@@ -89,13 +101,27 @@ class RobotModel(ABC):
     def fk(self, q: np.ndarray) -> np.ndarray:
         """Task coordinates x(q), shape (m,)."""
 
+    def rotation(self, q: np.ndarray) -> np.ndarray:
+        """Orientation of the task frame (frame to world), shape (3, 3): a pose task's robot has it."""
+        raise NotImplementedError(f"robot {self.description.name!r} has no task orientation")
+
+    def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A pose task's robot: the task frame's position (3,), orientation (3, 3) and full Jacobian
+        (6, n) (world linear rows, then angular rows about the frame's own axes), in one pass."""
+        raise NotImplementedError(f"robot {self.description.name!r} has no task orientation")
+
     @abstractmethod
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        """Task Jacobian, shape (m, n): xd = J(q) qd."""
+        """Task Jacobian, shape (task_rows, n): the task velocity is J(q) qd (for a pose task, the
+        angular rows are about the task frame's own axes)."""
 
     @abstractmethod
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """Jdot(q, qd) qd, shape (m,): the task acceleration when qdd = 0."""
+        """Jdot(q, qd) qd, shape (task_rows,): the task acceleration when qdd = 0."""
+
+    def jacobian_derivative(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """dJ/dt (task_rows, n) along the motion (q, qd): what a solver for redundant tasks needs."""
+        raise NotImplementedError(f"robot {self.description.name!r} gives no Jacobian derivative")
 
     # -- dynamics -----------------------------------------------------------------------------
     @abstractmethod

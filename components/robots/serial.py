@@ -1,11 +1,14 @@
 """A serial robot from its URDF, with kinematics and dynamics from Pinocchio.
 
-Joint coordinates q are the URDF's revolute (rad) and prismatic (m) joints, in URDF order.
-Task coordinates are the chosen world axes of the task frame's position (m).
+Joint coordinates q are the URDF's revolute (rad) and prismatic (m) joints, in URDF order, but
+those the description locks (``[joints] locked``: Pinocchio's reduced model, the locked joints
+fixed at their values). Task coordinates are the chosen world axes of the task frame's position
+(m); a pose task adds rotations about the frame's own axes (see :class:`SerialRobot`).
 """
 from __future__ import annotations
 
 import math
+from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
@@ -18,8 +21,88 @@ _CONTINUOUS = "continuous (Pinocchio's q = (cos, sin))"
 #: What a joint that robofmu does not take is, by a word of Pinocchio's joint model name
 #: (``JointModelRUBZ``, ``JointModelRevoluteUnboundedUnaligned``, ``JointModelSpherical``, ...).
 _JOINT_KINDS = {"RUB": _CONTINUOUS, "Unbounded": _CONTINUOUS, "Spherical": "spherical", "FreeFlyer": "floating",
-                "Planar": "planar", "Translation": "a translation", "Composite": "composite",
-                "Mimic": "a mimic joint"}
+                "Planar": "planar", "Translation": "a translation", "Composite": "composite"}
+
+
+def _urdf_model(description: RobotDescription) -> pin.Model:
+    """Pinocchio's model of the description's URDF file.
+
+    A ``continuous`` joint is read as an unbounded revolute joint (q an angle, not Pinocchio's
+    (cos, sin) pair): its type becomes ``revolute`` with position limits [0, 0], which
+    :func:`_set_limits` reads as none; its effort and velocity limits stay. A joint that mimics
+    another (``<mimic>``) moves with it (Pinocchio's mimic joint: no coordinate of its own) unless
+    the description locks it; a mimic joint whose leader is locked must be locked too."""
+    urdf = description.urdf
+    text = urdf.read_text()
+    root = ElementTree.fromstring(text)
+    followers = {joint.get("name"): joint.find("mimic").get("joint") for joint in root.iter("joint")
+                 if joint.find("mimic") is not None}
+    for follower, leader in followers.items():
+        if leader in description.locked and follower not in description.locked:
+            raise ValueError(f"{description.path}: joints.locked: joint {follower!r} mimics the locked joint "
+                             f"{leader!r}: lock it too")
+    mimic = any(follower not in description.locked for follower in followers)
+    if 'type="continuous"' not in text and "type='continuous'" not in text:
+        return pin.buildModelFromUrdf(str(urdf), mimic)
+    for joint in root.iter("joint"):
+        if joint.get("type") == "continuous":
+            joint.set("type", "revolute")
+            limit = joint.find("limit")
+            if limit is None:
+                limit = ElementTree.SubElement(joint, "limit", effort="0", velocity="0")
+            limit.set("lower", "0")
+            limit.set("upper", "0")
+    return pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode"), mimic)
+
+
+def _locked(model: pin.Model, description: RobotDescription) -> pin.Model:
+    """The model without the joints the description locks, each fixed at its value (Pinocchio's
+    reduced model); the model itself if it locks none."""
+    if not description.locked:
+        return model
+    reference = pin.neutral(model)
+    ids = []
+    for joint, value in description.locked.items():
+        key = f"joints.locked.{joint}"
+        if not model.existJointName(joint):
+            raise ValueError(f"{description.path}: {key}: no joint {joint!r} in {description.urdf.name} "
+                             f"(its joints: {', '.join(model.names[1:])})")
+        j = model.getJointId(joint)
+        if model.joints[j].nq != 1:
+            raise ValueError(f"{description.path}: {key}: only a revolute or prismatic joint can be locked")
+        k = model.joints[j].idx_q
+        low, high = model.lowerPositionLimit[k], model.upperPositionLimit[k]
+        if not low <= value <= high:
+            raise ValueError(f"{description.path}: {key}: {value:g} lies outside the joint's limits "
+                             f"[{low:g}, {high:g}]")
+        reference[k] = value
+        ids.append(j)
+    return pin.buildReducedModel(model, ids, reference)
+
+
+def _set_limits(model: pin.Model, description: RobotDescription) -> None:
+    """The joint limits as data: the URDF's, a joint whose position limits are [0, 0] (its
+    <limit> names none) unlimited, a velocity or effort limit of 0 none, and the description's
+    ``[joints.limits.<joint>]`` over them."""
+    fields = {"lower": "lowerPositionLimit", "upper": "upperPositionLimit", "velocity": "velocityLimit",
+              "effort": "effortLimit"}
+    arrays = {key: getattr(model, name).copy() for key, name in fields.items()}
+    unset = (arrays["lower"] == 0.0) & (arrays["upper"] == 0.0)
+    arrays["lower"][unset], arrays["upper"][unset] = -np.inf, np.inf
+    for key in ("velocity", "effort"):
+        arrays[key][arrays[key] == 0.0] = np.inf
+    for joint, limits in description.joint_limits.items():
+        if not model.existJointName(joint):
+            raise ValueError(f"{description.path}: joints.limits.{joint}: no joint {joint!r} in "
+                             f"{description.urdf.name} (its joints: {', '.join(model.names[1:])})")
+        k = model.joints[model.getJointId(joint)].idx_q
+        for key, value in limits.items():
+            arrays[key][k] = value
+        if not arrays["lower"][k] < arrays["upper"][k]:
+            raise ValueError(f"{description.path}: joints.limits.{joint}: lower {arrays['lower'][k]:g} must be "
+                             f"below upper {arrays['upper'][k]:g}")
+    for key, name in fields.items():
+        setattr(model, name, arrays[key])
 
 
 class SerialRobot(RobotModel):
@@ -27,6 +110,12 @@ class SerialRobot(RobotModel):
 
     Each instance owns its model, so a payload set on one (``set_payload``) leaves the others
     alone: the plant and the controller each hold their own.
+
+    A pose task (``[task] orientation_axes``) has :attr:`task_rows` = m + len(orientation_axes)
+    rows of velocity: first the task position's (world axes, m/s), then the angular velocity
+    about the task frame's own axes ``orientation_axes`` (rad/s); :meth:`jacobian` and
+    :meth:`jdot_qdot` have these rows. :meth:`fk` is the position only; :meth:`rotation` the
+    frame's orientation (3, 3), frame to world.
 
     Parameters
     ----------
@@ -38,9 +127,10 @@ class SerialRobot(RobotModel):
 
     def __init__(self, description: RobotDescription, gravity: float | None = None):
         self.description = description
-        self.model = pin.buildModelFromUrdf(str(description.urdf))
+        self.model = _locked(_urdf_model(description), description)
         self.data = self.model.createData()
         self._check_joints_and_links()
+        _set_limits(self.model, description)
         self.n = self.model.nv
         if len(description.configuration("home")) != self.n:
             raise ValueError(f"{description.path}: configurations.home: needs {self.n} joint values "
@@ -51,6 +141,9 @@ class SerialRobot(RobotModel):
         first = int(self._axes[0])               # the Jacobian's task rows: a slice where consecutive
         consecutive = list(self._axes) == list(range(first, first + self.m))
         self._rows = slice(first, first + self.m) if consecutive else self._axes
+        self.orientation_axes = tuple(description.task.orientation_axes)
+        self._orientation_rows = list(self.orientation_axes)
+        self._pose_jacobian = np.zeros((self.task_rows, self.n))
         self._direction = np.array(description.gravity_direction)
         self.set_gravity(description.gravity if gravity is None else gravity)
         self.payload = 0.0
@@ -60,9 +153,10 @@ class SerialRobot(RobotModel):
             self._payload_lever = frame.placement.translation.copy()
             self._bare_inertia = self.model.inertias[self._payload_joint].copy()
         self._zero = np.zeros(self.n)
-        self.joint_names = [self.model.names[j] for j in range(1, self.model.njoints)]
-        self.prismatic = [self.model.joints[j].shortname().startswith("JointModelP")
-                          for j in range(1, self.model.njoints)]
+        joints = [j for j in range(1, self.model.njoints) if self.model.joints[j].nv]   # not a mimic
+        self.joint_names = [self.model.names[j] for j in joints]
+        self.prismatic = [self.model.joints[j].shortname().startswith("JointModelP") for j in joints]
+        self._mimic = len(joints) < self.model.njoints - 1   # Pinocchio's ABA and energies take none
 
     def _check_joints_and_links(self) -> None:
         """Refuse, naming the joint or link, what the run would otherwise discover at t = 0: a joint
@@ -73,7 +167,8 @@ class SerialRobot(RobotModel):
         model, urdf = self.model, self.description.urdf.name
         for j in range(1, model.njoints):
             joint, kind = model.names[j], model.joints[j].shortname()
-            if not kind.startswith(("JointModelR", "JointModelP")) or model.joints[j].nq != 1:
+            mimic = kind == "JointModelMimic"
+            if not mimic and (not kind.startswith(("JointModelR", "JointModelP")) or model.joints[j].nq != 1):
                 what = next((text for word, text in _JOINT_KINDS.items() if word in kind), kind)
                 raise ValueError(f"{urdf}: joint {joint!r} is {what}; robofmu "
                                  "supports revolute and prismatic joints")
@@ -108,6 +203,10 @@ class SerialRobot(RobotModel):
         """The URDF's joint velocity limits (Pinocchio's velocityLimit)."""
         return self.model.velocityLimit.copy()
 
+    def effort_limits(self) -> np.ndarray:
+        """The URDF's joint effort limits (Pinocchio's effortLimit)."""
+        return self.model.effortLimit.copy()
+
     # -- parameters -------------------------------------------------------------------------
     def set_gravity(self, magnitude: float) -> None:
         self.gravity = float(magnitude)
@@ -130,14 +229,60 @@ class SerialRobot(RobotModel):
         pin.forwardKinematics(self.model, self.data, q)
         return pin.updateFramePlacement(self.model, self.data, self.task_id).translation[self._rows]
 
+    def rotation(self, q: np.ndarray) -> np.ndarray:
+        pin.forwardKinematics(self.model, self.data, q)
+        return pin.updateFramePlacement(self.model, self.data, self.task_id).rotation.copy()
+
+    def pose(self, q: np.ndarray) -> pin.SE3:
+        """The task frame's placement (frame to world) at ``q``: a new ``pinocchio.SE3``."""
+        pin.forwardKinematics(self.model, self.data, q)
+        return pin.updateFramePlacement(self.model, self.data, self.task_id).copy()
+
+    def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The task frame's position (3,) and orientation (3, 3) (world), and its full Jacobian
+        (6, n): rows world linear velocity, then angular velocity about the frame's own axes.
+        New arrays, from one pass of Pinocchio's kinematics."""
+        J = pin.computeFrameJacobian(self.model, self.data, q, self.task_id, pin.LOCAL_WORLD_ALIGNED)
+        placement = self.data.oMf[self.task_id]
+        rotation = placement.rotation.copy()
+        J[3:] = rotation.T @ J[3:]
+        return placement.translation.copy(), rotation, J
+
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        return pin.computeFrameJacobian(self.model, self.data, q, self.task_id,
-                                        pin.LOCAL_WORLD_ALIGNED)[self._rows]
+        J = pin.computeFrameJacobian(self.model, self.data, q, self.task_id, pin.LOCAL_WORLD_ALIGNED)
+        if not self.orientation_axes:
+            return J[self._rows]
+        out = self._pose_jacobian
+        out[:self.m] = J[self._rows]
+        rotation = self.data.oMf[self.task_id].rotation       # angular rows about the frame's own axes
+        out[self.m:] = (rotation.T @ J[3:])[self._orientation_rows]
+        return out.copy()
 
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q, qd, self._zero)
-        return pin.getFrameClassicalAcceleration(self.model, self.data, self.task_id,
-                                                 pin.LOCAL_WORLD_ALIGNED).linear[self._rows]
+        acceleration = pin.getFrameClassicalAcceleration(self.model, self.data, self.task_id,
+                                                         pin.LOCAL_WORLD_ALIGNED)
+        if not self.orientation_axes:
+            return acceleration.linear[self._rows]
+        # d/dt (R^T omega) = R^T omega_dot (the term dR^T/dt omega = -R^T (omega x omega) vanishes)
+        rotation = pin.updateFramePlacement(self.model, self.data, self.task_id).rotation
+        return np.concatenate([acceleration.linear[self._rows],
+                               (rotation.T @ acceleration.angular)[self._orientation_rows]])
+
+    def jacobian_derivative(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """dJ/dt (task_rows, n) of :meth:`jacobian` along the motion (q, qd): Pinocchio's frame
+        Jacobian time variation (world-aligned), and for the angular rows about the frame's own
+        axes d(R^T J_w)/dt = R^T (dJ_w/dt - [omega]x J_w). A new array."""
+        model, data, frame = self.model, self.data, self.task_id
+        pin.computeJointJacobiansTimeVariation(model, data, q, qd)
+        pin.updateFramePlacement(model, data, frame)
+        derivative = pin.getFrameJacobianTimeVariation(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
+        if not self.orientation_axes:
+            return derivative[self._rows]
+        J = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
+        omega = J[3:] @ qd
+        angular = data.oMf[frame].rotation.T @ (derivative[3:] - pin.skew(omega) @ J[3:])
+        return np.vstack([derivative[self._rows], angular[self._orientation_rows]])
 
     # -- dynamics ---------------------------------------------------------------------------
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
@@ -154,20 +299,30 @@ class SerialRobot(RobotModel):
         return pin.computeGeneralizedGravity(self.model, self.data, q).copy()
 
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        if self._mimic:                          # M qdd = tau - N, M from CRBA (ABA takes no mimic joint)
+            return np.linalg.solve(self.mass_matrix(q), tau - self.nonlinear_effects(q, qd))
         return pin.aba(self.model, self.data, q, qd, tau).copy()
 
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         return pin.rnea(self.model, self.data, q, qd, qdd).copy()
 
     def forward_dynamics_floats(self, q, qd, tau) -> list[float]:
+        if self._mimic:
+            return self.forward_dynamics(q, qd, tau).tolist()
         return pin.aba(self.model, self.data, q, qd, tau).tolist()
 
     def inverse_dynamics_into(self, q, qd, qdd, out) -> None:
         out[:] = pin.rnea(self.model, self.data, q, qd, qdd)
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        if self._mimic:
+            return 0.5 * float(qd @ self.mass_matrix(q) @ qd)
         return float(pin.computeKineticEnergy(self.model, self.data, q, qd))
 
     def potential_energy(self, q: np.ndarray) -> float:
         """Gravitational potential energy (J), zero at the world origin's height."""
+        if self._mimic:                          # -sum of m_i g . c_i over the bodies
+            pin.forwardKinematics(self.model, self.data, q)
+            return -sum(inertia.mass * float(self.model.gravity.linear @ (placement.act(inertia.lever)))
+                        for inertia, placement in zip(self.model.inertias[1:], self.data.oMi[1:]))
         return float(pin.computePotentialEnergy(self.model, self.data, q))

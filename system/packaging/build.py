@@ -1,18 +1,24 @@
 """Build the block FMUs of a robot with pythonfmu: ``fmus/<robot>/<block>.fmu``.
 
-Each FMU gets a generated script whose class name, ``robofmu_<robot>_<block>``, is its model
-identifier (unique across the collection), and bundles a copy of ``robofmu.components``. Its
+The robot is one of the package's (by name) or a robot TOML anywhere (by path). Each FMU gets a
+generated script whose class name, ``robofmu_<robot>_<block>``, is its model identifier (unique
+across the collection), and bundles the code of ``robofmu.components``
+(:func:`robofmu.components.code_files`: no robot's data folder) and its own robot's data in
+``resources/robot/``: the TOML as ``<robot>.toml`` and, for a URDF robot, the URDF the TOML
+resolves to (beside it, or in an installed distribution) as ``<robot>.urdf``. Its
 ``binaries/linux64/<modelIdentifier>.so`` is robofmu's FMI export library, in front of
 pythonfmu's (:mod:`robofmu.system.packaging.fmi_export`: FMI statuses and logging as the standard means
 them); the build compiles it once (cached) and fails if it cannot. Its ``resources/requirements.txt``
 is derived from the bundled copy's imports (:mod:`robofmu.system.packaging.requirements`); an import that no
 installed distribution provides fails the build. The script also carries robofmu's version, from
 its package metadata (pyproject.toml), where no robofmu is installed: the model description's
-``version`` is ``<robofmu version>+<source hash>``.
+``version`` is ``<robofmu version>+<code hash>.<robot data hash>``
+(:func:`robofmu.components.fmi.base.fmu_version`).
 """
 from __future__ import annotations
 
 import logging
+import re
 import shutil
 import sys
 import tempfile
@@ -22,7 +28,8 @@ from pathlib import Path
 from pythonfmu import FmuBuilder
 
 import robofmu.components as components
-from robofmu.components.robots import available, load_description
+from robofmu.components.fmi.base import ROBOT_FOLDER
+from robofmu.components.robots import RobotDescription, load_description
 from robofmu.system.packaging import fmi_export
 from robofmu.system.packaging.requirements import requirements_text
 
@@ -55,49 +62,83 @@ def robofmu_version() -> str:
     return metadata.version("robofmu")
 
 
-def blocks_of(robot: str) -> list[str]:
-    """Blocks a robot has, in diagram order (its description's ``blocks``)."""
-    if robot not in available():
-        raise ValueError(f"unknown robot {robot!r}; described robots: {', '.join(available())}")
-    return list(load_description(robot).blocks)
+def check_name(description: RobotDescription) -> RobotDescription:
+    """``description``, if its robot's name can be part of a model identifier (``robofmu_<name>_<block>``:
+    letters, digits, underscores); ValueError naming the file otherwise."""
+    if not re.fullmatch(r"[A-Za-z0-9_]+", description.name):
+        raise ValueError(f"{description.path}: name: {description.name!r} cannot be part of the FMUs' model "
+                         f"identifier (robofmu_{description.name}_<block>): use letters, digits and underscores")
+    return description
 
 
-def build(robot: str, out_dir: str | Path = "fmus", blocks: list[str] | None = None,
+def stage_robot(description: RobotDescription, folder: Path) -> list[Path]:
+    """Copy a robot's data into ``folder`` as an FMU carries it: ``<name>.toml`` and, for a URDF
+    robot, the URDF the description resolved (wherever it lives) as ``<name>.urdf``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    copies = [folder / f"{description.name}.toml"]
+    shutil.copyfile(description.path, copies[0])
+    if description.urdf is not None:
+        copies.append(folder / f"{description.name}.urdf")
+        shutil.copyfile(description.urdf, copies[1])
+    return copies
+
+
+def stage_code(package_dir: Path, target: Path) -> None:
+    """Copy the package's code (:func:`robofmu.components.code_files`) to ``target``."""
+    for relative in components.code_files(package_dir):
+        (target / relative).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(package_dir / relative, target / relative)
+
+
+def build(robot: str | Path, out_dir: str | Path = "fmus", blocks: list[str] | None = None,
           log=print) -> list[Path]:
-    """Build ``out_dir/<robot>/<block>.fmu`` for each block; returns the paths.
+    """Build ``out_dir/<robot name>/<block>.fmu`` for each block; returns the paths.
 
     Parameters
     ----------
-    robot : str
-        A described robot (``robofmu.components.robots.available()``).
+    robot : str or Path
+        A described robot (``robofmu.components.robots.available()``) or the path of a robot
+        TOML anywhere (its URDF relative to it, or in an installed distribution).
     out_dir : str or Path
         Root folder of the FMU collection.
     blocks : list of str, optional
         Subset of the robot's blocks; default all.
     log : callable
         Progress messages (one line per FMU).
+
+    Raises
+    ------
+    ValueError
+        An unknown robot, a missing or malformed robot TOML, a robot name that cannot be part
+        of a model identifier, a robot model that refuses its URDF or its description (naming the
+        joint, link or key), a reference trajectory that leaves the joints' limits or the
+        workspace (naming joint, limit and time: :func:`checked`), an import of the code that no
+        installed distribution provides.
     """
-    blocks = blocks_of(robot) if blocks is None else blocks
+    description = check_name(load_description(robot))
+    name = description.name
+    blocks = list(description.blocks) if blocks is None else blocks
+    checked(description, log)
     version = robofmu_version()
     export_library = fmi_export.library(log=log)     # first: a missing compiler fails before any FMU
-    dest = Path(out_dir) / robot
+    dest = Path(out_dir) / name
     dest.mkdir(parents=True, exist_ok=True)
     built = []
     logging.getLogger("pythonfmu").setLevel(logging.WARNING)
     with tempfile.TemporaryDirectory(prefix="robofmu_build_") as tmp:
         staging = Path(tmp)
-        package = staging / "robofmu" / "components"
-        shutil.copytree(Path(components.__file__).parent, package,
-                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        stage_code(Path(components.__file__).parent, staging / "robofmu" / "components")
+        stage_robot(description, staging / ROBOT_FOLDER)
         requirements = staging / "requirements.txt"     # derived from the staged copy's imports
         requirements.write_text(requirements_text(staging / "robofmu"))
         for block in blocks:
-            identifier = model_identifier(robot, block)
+            identifier = model_identifier(name, block)
             script = staging / f"{identifier}.py"
-            script.write_text(_SCRIPT.format(robot=robot, block=block, identifier=identifier, version=version))
+            script.write_text(_SCRIPT.format(robot=name, block=block, identifier=identifier, version=version))
             target = dest / f"{block}.fmu"
             try:
-                FmuBuilder.build_FMU(script, dest=target, project_files=[staging / "robofmu", requirements],
+                FmuBuilder.build_FMU(script, dest=target,
+                                     project_files=[staging / "robofmu", staging / ROBOT_FOLDER, requirements],
                                      canGetAndSetFMUstate=True, canSerializeFMUstate=True)
             finally:
                 # pythonfmu's builder imports the script and leaves it (and its folder on
@@ -110,3 +151,26 @@ def build(robot: str, out_dir: str | Path = "fmus", blocks: list[str] | None = N
             log(f"built {target}  (model identifier {identifier})")
             built.append(target)
     return built
+
+
+def checked(description, log=print) -> None:
+    """What the run would otherwise discover, checked before any FMU is built: the robot's model
+    loads (URDF, locked joints, limits, task frame, home), its IK solver accepts the task, and its
+    reference trajectory, sampled at the default communication step and solved by its IK, stays
+    inside the joints' position and velocity limits (:func:`robofmu.components.preflight.check_reference`).
+    One line of what was found goes to ``log``.
+
+    Raises
+    ------
+    ValueError
+        Naming the problem (joint, limit and time for the reference)."""
+    from robofmu.components.preflight import check_reference
+
+    found = check_reference(description)
+    if found is None:
+        return
+    residual = "" if found.ik_residual is None else f", IK residual at most {found.ik_residual:.1e}"
+    margin = "no position limits" if found.position_margin == float("inf") else (
+        f"joints at least {found.position_margin:.3g} from their position limits")
+    log(f"{description.name}: reference checked over {found.duration:g} s ({found.samples} samples): {margin}, "
+        f"at most {found.speed_ratio * 100:.0f} % of their velocity limits{residual}")

@@ -16,9 +16,10 @@ those every FMU carries in its resources (``pythonfmu``, ``robofmu``). robofmu's
 requirements (the master's and the analysis') are checked as installed, not imported.
 
 Then it checks: each package importable (the FMUs' ones imported, with their version against the
-requirement), libpython present, every described robot's FMUs present under ``--fmus`` and built
-from these sources (each FMU's vendor annotation ``source`` against
-:data:`robofmu.components.SOURCE_HASH`), and one FMU instantiated and stepped through fmpy in a
+requirement), libpython present, every described robot's FMUs present under ``--fmus`` and not
+stale (:func:`robofmu.system.fmu.stale_reasons`: built from this code, each FMU's vendor
+annotation ``source`` against :data:`robofmu.components.SOURCE_HASH`, with its robot's data as
+described now, and robofmu's version), and one FMU instantiated and stepped through fmpy in a
 fresh process. :func:`doctor` prints one line per check and per problem; it returns 0 when
 everything checks, else 1.
 """
@@ -253,21 +254,23 @@ def _package_checks(required: list[Requirement]) -> tuple[list[str], list[str]]:
 def fmu_problems(fmu_dir: Path) -> tuple[list[str], list[str], list[Path]]:
     """(ok lines, problems, good FMUs) of the FMU collection under ``fmu_dir``.
 
-    Every block of every described robot must be at ``fmu_dir/<robot>/<block>.fmu`` and be built
-    from these sources (its vendor annotation's ``source`` is :data:`robofmu.components.SOURCE_HASH`).
+    Every block of every described robot must be at ``fmu_dir/<robot>/<block>.fmu`` and not be
+    stale (:func:`robofmu.system.fmu.stale_reasons`: built from these sources, its vendor
+    annotation's ``source`` is :data:`robofmu.components.SOURCE_HASH`, from its robot's data as
+    described now, by this robofmu version).
     """
     from robofmu.components import SOURCE_HASH
-    from robofmu.components.robots import available
+    from robofmu.components.robots import available, load_description
 
-    from robofmu.system.packaging.build import blocks_of
-    from robofmu.system.fmu import block_identity
+    from robofmu.system.fmu import stale_reasons
 
     if not fmu_dir.is_dir():
         what = "is a file, not a folder" if fmu_dir.exists() else "no such folder"
         return [], [f"--fmus {fmu_dir}: {what}; build the FMUs: robofmu build --out {fmu_dir}"], []
     problems, good, counts = [], [], {}
     for robot in available():
-        for block in blocks_of(robot):
+        description = load_description(robot)
+        for block in description.blocks:
             path = fmu_dir / robot / f"{block}.fmu"
             name = f"{robot}/{block}.fmu"
             build = f"robofmu build {robot} --out {fmu_dir}"
@@ -275,15 +278,13 @@ def fmu_problems(fmu_dir: Path) -> tuple[list[str], list[str], list[Path]]:
                 problems.append(f"{fmu_dir / name}: missing; build it: {build}")
                 continue
             try:
-                identity = block_identity(path)
+                reasons = stale_reasons(path, description)
             except Exception as exc:
                 problems.append(f"{fmu_dir / name}: not a robofmu FMU ({' '.join(str(exc).split())}); "
                                 f"rebuild it: {build}")
                 continue
-            if identity.get("source") != SOURCE_HASH:
-                problems.append(f"{fmu_dir / name}: stale: built from robofmu sources "
-                                f"{identity.get('source', '?')[:12]}, these are {SOURCE_HASH[:12]}; "
-                                f"rebuild it: {build}")
+            if reasons:
+                problems.append(f"{fmu_dir / name}: stale: {', '.join(reasons)}; rebuild it: {build}")
                 continue
             good.append(path)
             counts[robot] = counts.get(robot, 0) + 1

@@ -105,14 +105,16 @@ def diagnostics_lines(section: ExperimentSection, runs: dict, path: Path, fmu_di
     for name, found in recorded.items():
         system = load(name, fmu_dir=fmu_dir)
         for instance, signals in found.items():
-            tolerance = _parameter(system, instance, "tolerance")
+            tolerance = next((value for value in (_parameter(system, instance, name) for name in
+                                                  ("tolerance", "position_tolerance")) if value is not None), None)
             if tolerance is not None:
                 tolerances.setdefault(name, float(tolerance))
             it = signals.get("iterations")
             res = signals.get("residual")
             counts = ", ".join(f"{k}: {c}" for k, c in enumerate(np.bincount(it.astype(int))) if c) \
                 if it is not None else "—"
-            unit = printed(runs[name].result.units.get(f"{instance}.residual"))
+            unit = printed(runs[name].result.units.get(f"{instance}.residual")
+                           or runs[name].result.units.get(f"{instance}.position_residual"))
             unit = f" {unit}" if unit else ""
             rows.append([name, instance, "—" if it is None else f"{it[0]:.0f}",
                          "—" if it is None or len(it) < 2 else f"{it[1:].max():.0f}", counts,

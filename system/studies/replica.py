@@ -63,6 +63,17 @@ class _Wire:
             self.target.values[self.target_slots] = self.source.values[self.source_slots]
 
 
+def _description(system: System, robot: str):
+    """The description of the robot a FMU names: the experiment's robot where it is that one (a
+    robot TOML anywhere, by path), else the package's robot of that name."""
+    given = system.extra.get("robot")
+    if isinstance(given, str):
+        description = load_description(given)
+        if description.name == robot:
+            return description
+    return load_description(robot)
+
+
 def _consecutive(slots: np.ndarray) -> bool:
     return len(slots) > 0 and bool(np.all(np.diff(slots) == 1))
 
@@ -94,7 +105,7 @@ class InProcessDiagram:
             if identity.get("source") != SOURCE_HASH:
                 raise ValueError(f"block {name!r}: {node.path} was built from other robofmu sources "
                                  "than this process runs; rebuild the FMUs (`robofmu build`)")
-            description = load_description(identity["robot"])
+            description = _description(system, identity["robot"])
             block = block_class(identity["kind"], identity.get("variant", ""))(load_model(description))
             for variable, value in start_values(node.model_description).items():
                 block.set(variable, value)

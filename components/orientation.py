@@ -1,0 +1,42 @@
+"""Orientation on the ports: unit quaternions in the order (x, y, z, w), scalar last.
+
+The order is scipy's (``Rotation.as_quat``), Pinocchio's ``Quaternion.coeffs()`` and ROS's. A
+quaternion on a port is the orientation of a frame relative to the world (it rotates frame
+coordinates into world coordinates); angular velocities and accelerations on ports are in the
+world frame.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+__all__ = ["COMPONENTS", "UNIT_TOLERANCE", "quaternion_of", "rotation_of"]
+
+#: The components' order on the ports (``quat_ref[1]`` is x, ..., ``quat_ref[4]`` is w).
+COMPONENTS = "xyzw"
+#: A quaternion whose norm is this close to 1 is normalised; one further off is refused.
+UNIT_TOLERANCE = 1e-6
+
+
+def quaternion_of(rotation) -> list[float]:
+    """The unit quaternion (x, y, z, w) of a rotation matrix (3, 3), with w >= 0."""
+    x, y, z, w = pin.Quaternion(np.asarray(rotation, dtype=float)).coeffs().tolist()
+    return [-x, -y, -z, -w] if w < 0.0 else [x, y, z, w]
+
+
+def rotation_of(quaternion) -> np.ndarray:
+    """The rotation matrix (3, 3) of a quaternion (x, y, z, w), normalised.
+
+    Raises
+    ------
+    ValueError
+        If its norm differs from 1 by more than :data:`UNIT_TOLERANCE` (or is not finite).
+    """
+    x, y, z, w = (float(c) for c in quaternion)
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not abs(norm - 1.0) <= UNIT_TOLERANCE:
+        raise ValueError(f"the orientation quaternion (x, y, z, w) = ({x:.9g}, {y:.9g}, {z:.9g}, {w:.9g}) "
+                         f"has norm {norm:.9g}, not 1 (a unit quaternion is needed)")
+    return pin.Quaternion(w / norm, x / norm, y / norm, z / norm).toRotationMatrix()

@@ -1,0 +1,113 @@
+"""The industrial arms (issue 22): ur5-pose and panda-pose through the master at 1 ms, checked
+against an independent model: Pinocchio's FK of the recorded joints, on a model the test builds
+from the same URDF file (the Panda's fingers locked by hand), and the reference against scipy's
+Slerp. The acceptance bars: tool position within 0.1 mm and orientation within 0.5 mrad over the
+run, 0.01 mm and 0.05 mrad at the end, every joint inside its limits (the Panda's at least 0.1 rad)."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.spatial.transform import Rotation, Slerp
+
+from robofmu.components.robots import load_description
+from robofmu.components.trajectory import lspb
+from robofmu.system import experiment
+from robofmu.system.analysis import tracking_metrics
+from robofmu.system.master import Master
+from robofmu.system.roles import Roles
+
+CASES = {"ur5-pose": "ur5", "panda-pose": "panda"}
+
+
+def independent_model(robot: str):
+    """Pinocchio's model of the robot's URDF file, built here; locked joints removed by hand."""
+    description = load_description(robot)
+    model = pin.buildModelFromUrdf(str(description.urdf))
+    if description.locked:
+        reference = pin.neutral(model)
+        ids = [model.getJointId(name) for name in description.locked]
+        for j, value in zip(ids, description.locked.values()):
+            reference[model.joints[j].idx_q] = value
+        model = pin.buildReducedModel(model, ids, reference)
+    return model, model.getFrameId(description.task.frame)
+
+
+@pytest.fixture(scope="module", params=sorted(CASES))
+def run(request, fmu_root):
+    name = request.param
+    system = experiment.load(name, fmu_dir=fmu_root)
+    return name, system, Master(system).run()
+
+
+def test_the_tool_follows_the_pose_within_the_bars(run):
+    name, system, result = run
+    robot = CASES[name]
+    model, frame = independent_model(robot)
+    data = model.createData()
+    q = result.vector("plant.q")
+    reference = result.vector("trajectory.x_ref")
+    quaternions = result.vector("trajectory.quat_ref")
+    position, angle = [], []
+    for k in range(len(q)):
+        pin.framesForwardKinematics(model, data, q[k])
+        placement = data.oMf[frame]
+        position.append(np.linalg.norm(placement.translation - reference[k]))
+        angle.append((Rotation.from_quat(quaternions[k]).inv() * Rotation.from_matrix(placement.rotation)).magnitude())
+    position, angle = np.array(position), np.array(angle)
+    assert position.max() <= 1e-4 and angle.max() <= 5e-4, (position.max(), angle.max())
+    assert position[-1] <= 1e-5 and angle[-1] <= 5e-5, (position[-1], angle[-1])
+    assert position.max() > 1e-7                           # the loop does track (not a copy of the reference)
+    # the run's own analysis says the same
+    metrics = tracking_metrics(result, Roles.of(system))
+    np.testing.assert_allclose(metrics.tcp_error, position, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(metrics.orientation_error, angle, rtol=0, atol=1e-9)
+
+
+def test_every_joint_stays_inside_its_limits_and_the_blocks_say_so(run):
+    name, _, result = run
+    model, _ = independent_model(CASES[name])
+    q = result.vector("plant.q")
+    margin = np.minimum(q - model.lowerPositionLimit, model.upperPositionLimit - q)
+    assert margin.min() > (0.1 if name == "panda-pose" else 0.0), margin.min()
+    assert np.all(result["plant.within_limits"] == 1)
+    assert np.all(result["ik.status"] == 0) and np.all(result["ik.reachable"] == 1)
+    np.testing.assert_allclose(result["ik.joint_limit_margin"],
+                               np.min(np.minimum(result.vector("ik.q_ref") - model.lowerPositionLimit,
+                                                 model.upperPositionLimit - result.vector("ik.q_ref")), axis=1),
+                               rtol=0, atol=1e-12)
+    assert np.median(result["ik.iterations"][1:]) <= 2
+
+
+def test_the_reference_is_a_line_and_a_slerp_on_one_lspb_time_law(run):
+    name, _, result = run
+    robot = CASES[name]
+    description = load_description(robot)
+    model, frame = independent_model(robot)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, np.array(description.configuration("home")))
+    start = data.oMf[frame]
+    parameters = description.trajectory.parameters
+    R0 = Rotation.from_matrix(start.rotation)
+    R1 = R0 * Rotation.from_rotvec(parameters["rotation"])             # about the tool's own axes
+    slerp = Slerp([0.0, 1.0], Rotation.concatenate([R0, R1]))
+    for t in (0.0, 0.3, 0.7, 1.0, 1.5, 2.0, 2.5):
+        k = int(round(t / 1e-3))
+        s = float(lspb([0.0], [1.0], parameters["duration"], t)[0][0])
+        np.testing.assert_allclose(result.vector("trajectory.x_ref")[k],
+                                   start.translation + s * np.array(parameters["displacement"]), atol=1e-12)
+        recorded = Rotation.from_quat(result.vector("trajectory.quat_ref")[k])
+        assert (recorded.inv() * slerp(s)).magnitude() < 1e-12, t
+
+
+def test_the_fk_block_outputs_the_frames_position_and_orientation(run):
+    name, _, result = run
+    model, frame = independent_model(CASES[name])
+    data = model.createData()
+    q = result.vector("plant.q")
+    for k in (0, len(q) // 2, len(q) - 1):
+        pin.framesForwardKinematics(model, data, q[k])
+        np.testing.assert_allclose(result.vector("fk.x")[k], data.oMf[frame].translation, atol=1e-14)
+        quaternion = result.vector("fk.quat")[k]
+        assert quaternion[3] >= 0.0 and abs(np.linalg.norm(quaternion) - 1.0) < 1e-14
+        assert (Rotation.from_quat(quaternion).inv() * Rotation.from_matrix(data.oMf[frame].rotation)).magnitude() < 1e-12

@@ -46,6 +46,52 @@ def robot_blocks(kinds=None, robots=None) -> list:
     return params
 
 
+#: The Boolean outputs of robofmu's blocks (by variable name): ik ``reachable``, trajectory and
+#: plant ``grip``, plant ``within_limits``, controller ``saturated``. A tool that records Reals
+#: only (libcosim, ecos) has every other column.
+BOOLEAN_OUTPUTS = ("grip", "reachable", "within_limits", "saturated")
+
+
+def real_columns(columns) -> list:
+    """The columns of Real signals: every column but the Boolean outputs'."""
+    return [c for c in columns if c.split(".", 1)[-1] not in BOOLEAN_OUTPUTS]
+
+
+def assert_same_run(other, master, what: str, atol: float = 0.0, skip=()) -> None:
+    """Another tool's run equals the master's: every column of ``other``, exactly (``atol`` 0) or
+    to ``atol`` times its range. An experiment whose IK carries its solution forward by its rates
+    (damped least squares: its start, and a redundant arm's null-space path, depend on the order in
+    which a host evaluates and steps it; a host that sets the next point's inputs before doStep
+    starts it elsewhere) is compared at the task: the trajectory as every column, the frame's pose from the
+    plant's joints (``fk``) to 1e-6 m and 1e-6 (quaternion; the loop's tracking error, up to 0.01 mm,
+    differs by about 2e-7 m along another null-space path), every other column to 1e-9 of its range for a square
+    task (the solver's tolerance) and not at all for a redundant one."""
+    if "ik.status" in master.columns:                       # the damped least-squares IK
+        redundant = len([c for c in master.columns if c.startswith("ik.q_ref[")]) > sum(
+            1 for c in master.columns if c.startswith(("trajectory.xd_ref[", "trajectory.omega_ref[")))
+        for column in other.columns:
+            block = column.split(".", 1)[0]
+            scale = max(1.0, float(np.max(np.abs(master[column]))))
+            if block == "trajectory":
+                np.testing.assert_allclose(other[column], master[column], rtol=0, atol=atol * scale,
+                                           err_msg=f"{what}: {column}")
+            elif block == "fk":
+                np.testing.assert_allclose(other[column], master[column], rtol=0, atol=1e-6, err_msg=f"{what}: {column}")
+            elif not redundant and column not in skip and not column.endswith((".iterations", ".status")):
+                np.testing.assert_allclose(other[column], master[column], rtol=0, atol=max(atol, 1e-9) * scale,
+                                           err_msg=f"{what}: {column}")
+        return
+    for column in other.columns:
+        if column in skip:
+            continue
+        if atol == 0.0:
+            np.testing.assert_array_equal(other[column], master[column], err_msg=f"{what}: {column}")
+        else:
+            scale = max(1.0, float(np.max(np.abs(master[column]))))
+            np.testing.assert_allclose(other[column], master[column], rtol=0, atol=atol * scale,
+                                       err_msg=f"{what}: {column}")
+
+
 #: One computed-torque PD experiment per robot (its flagship loop): for the tests that run every
 #: robot's whole diagram in another FMI tool (a PD loop has no state in its feedthrough blocks).
 PD_EXPERIMENTS = {"chess": "chess-pd", "rrp": "rrp-line", "rpp": "rpp-bangbang", "planar2r": "planar2r-nr",

@@ -44,6 +44,8 @@ import zipfile
 import numpy as np
 import pytest
 
+from fmu_util import real_columns
+
 from robofmu.components.robots import load_description, load_model
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
@@ -460,7 +462,7 @@ def assert_equal_to_jacobi(saved, jac, what):
     """Every Real output libcosim recorded, to 1e-12 of its range (tests/test_ssp.py)."""
     time, columns, data = as_result(saved)
     np.testing.assert_allclose(time, jac.time, rtol=0, atol=1e-12, err_msg=what)
-    real = [c for c in jac.columns if not c.endswith(("grip", "reachable"))]
+    real = real_columns(jac.columns)
     assert sorted(columns) == sorted(real), what
     for j, name in enumerate(columns):
         scale = max(1.0, np.max(np.abs(jac[name])))

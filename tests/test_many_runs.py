@@ -18,7 +18,8 @@ VARIED = {"plant": ("g", 9.81, 3.0), "controller": ("g", 9.81, 3.0), "fk": None,
 #: Where gravity does no work (3rrp, a horizontal plane) g changes nothing: vary these instead.
 WITHOUT_GRAVITY = {"plant": ("qd0[1]", 0.0, 0.5), "controller": ("q_ref[1]", 0.0, 0.01)}
 TRAJECTORY = {"waypoints": ("cruise_factor", 1.5, 1.8), "line": ("a_max", 0.0375, 0.02),
-              "joint_bangbang": ("a_max[1]", 3.0, 1.5), "circle": ("cruise_factor", 1.5, 1.8)}
+              "joint_bangbang": ("a_max[1]", 3.0, 1.5), "circle": ("cruise_factor", 1.5, 1.8),
+              "pose_line": ("cruise_factor", 1.5, 1.8)}
 
 SCRIPT = textwrap.dedent("""
     import json, sys

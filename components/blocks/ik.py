@@ -103,8 +103,9 @@ class IKBlock(Block):
         self.diagnostics = [(d.name, self.real(d.name, "output", joint_unit if d.unit == JOINT_UNIT else d.unit,
                                                d.description, depends=xs))
                             for d in self.solver_type.diagnostics]
-        self.last = None          # last valid joint position, velocity, acceleration and time
+        self.last = None          # last valid joint position, velocity and acceleration
         self.committed = None     # the last valid solution at the end of the last completed step
+        self.elapsed = 0.0        # the last completed step's size (s): how far to carry it forward
         self.outside = False      # in an excursion (warned once per excursion)
         self.reason = ""          # why the last target was not reachable
 
@@ -115,6 +116,7 @@ class IKBlock(Block):
         self.qd_limit = self.finite_vector("qd_limit", above=0.0)
         self.last = None
         self.committed = None
+        self.elapsed = 0.0
         self.outside = False
         v = self.values                          # views, made once (the values array is never replaced)
         self._targets = (v[self.x], v[self.xd], v[self.xdd])
@@ -129,8 +131,7 @@ class IKBlock(Block):
         if self.committed is None:
             self.solver.start_from(None)
         else:
-            q, qd, qdd, when = self.committed
-            self.solver.start_from(q, qd, qdd, t - when)
+            self.solver.start_from(*self.committed, self.elapsed)
         try:
             try:
                 q, qd, qdd = self.solver.solve(*self._targets)
@@ -157,32 +158,29 @@ class IKBlock(Block):
             return
         v[self.reachable] = 1.0
         self.outside = False
-        self.last = (q, qd, qdd, t)
+        self.last = (q, qd, qdd)
         q_out, qd_out, qdd_out = self._outputs
         q_out[:], qd_out[:], qdd_out[:] = q, qd, qdd
 
     def advance(self, t, h):
         self.committed = self.last
+        self.elapsed = h
 
     def internal_state(self):
-        return {"last": _listed(self.last), "committed": _listed(self.committed), "outside": self.outside}
+        return {"last": _listed(self.last), "committed": _listed(self.committed), "elapsed": self.elapsed,
+                "outside": self.outside}
 
     def set_internal_state(self, state):
         self.last = _solution(state["last"])
         self.committed = _solution(state["committed"])
+        self.elapsed = float(state["elapsed"])
         self.outside = bool(state["outside"])
 
 
 def _listed(solution):
-    """A solution (q, qd, qdd, t) as plain lists and a float (FMU state), or None."""
-    if solution is None:
-        return None
-    q, qd, qdd, t = solution
-    return [[float(x) for x in q], [float(x) for x in qd], [float(x) for x in qdd], float(t)]
+    """A solution (q, qd, qdd) as plain lists (FMU state), or None."""
+    return None if solution is None else [[float(x) for x in v] for v in solution]
 
 
 def _solution(listed):
-    if listed is None:
-        return None
-    q, qd, qdd, t = listed
-    return np.array(q), np.array(qd), np.array(qdd), float(t)
+    return None if listed is None else tuple(np.array(v) for v in listed)

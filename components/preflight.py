@@ -16,7 +16,7 @@ import numpy as np
 from .blocks import make_block
 from .robots import RobotDescription, load_model
 
-__all__ = ["ReferenceCheck", "check_reference"]
+__all__ = ["ReferenceCheck", "check_reference", "check_references"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,22 @@ class ReferenceCheck:
 
 class ReferenceError(ValueError):
     """The reference leaves the workspace or the joints' limits; the message names joint, limit, time."""
+
+
+def check_references(description: RobotDescription, step_size: float = 1e-3) -> dict[str, ReferenceCheck]:
+    """:func:`check_reference` of the robot's reference and of each named profile, by profile
+    name ("" the default); empty for a robot without a trajectory block."""
+    found = {}
+    for fmu in description.fmu_blocks:
+        kind, profile, described = description.block_of(fmu)
+        if kind == "trajectory":
+            try:
+                found[profile] = check_reference(described, step_size)
+            except ReferenceError as exc:
+                raise ReferenceError(f"profile {profile!r}: {exc}" if profile else str(exc)) from None
+    if not found:
+        check_reference(description, step_size)        # home within the limits
+    return found
 
 
 def check_reference(description: RobotDescription, step_size: float = 1e-3) -> ReferenceCheck | None:

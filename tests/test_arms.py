@@ -111,3 +111,31 @@ def test_the_fk_block_outputs_the_frames_position_and_orientation(run):
         quaternion = result.vector("fk.quat")[k]
         assert quaternion[3] >= 0.0 and abs(np.linalg.norm(quaternion) - 1.0) < 1e-14
         assert (Rotation.from_quat(quaternion).inv() * Rotation.from_matrix(data.oMf[frame].rotation)).magnitude() < 1e-12
+
+
+JOINT_CASES = {"ur5-joint": "ur5", "panda-joint": "panda"}
+
+
+@pytest.mark.parametrize("name", sorted(JOINT_CASES))
+def test_the_same_arm_in_joint_space_follows_its_second_profile(name, fmu_root):
+    """The robot's [trajectories.joint] profile, its own FMU (trajectory_joint.fmu): the recorded
+    reference is the synchronized bang-bang evaluated here, the joints track it within 1 mrad and
+    end at rest on q_end; the FMU says which profile it is."""
+    from robofmu.components.trajectory import SynchronizedBangBang
+    from robofmu.system.fmu import block_identity
+
+    robot = JOINT_CASES[name]
+    system = experiment.load(name, fmu_dir=fmu_root)
+    identity = block_identity(fmu_root / robot / "trajectory_joint.fmu")
+    assert (identity["kind"], identity["variant"], identity["profile"]) == ("trajectory", "joint_bangbang", "joint")
+    assert block_identity(fmu_root / robot / "trajectory.fmu")["profile"] == ""
+    result = Master(system).run()
+    parameters = load_description(robot).profiles["joint"].parameters
+    profile = SynchronizedBangBang(parameters["q_start"], parameters["q_end"], parameters["a_max"])
+    expected = np.array([profile.evaluate(t)[0] for t in result.time])
+    np.testing.assert_allclose(result.vector("trajectory.q_ref"), expected, rtol=0, atol=1e-14)
+    error = np.abs(result.vector("trajectory.q_ref") - result.vector("plant.q"))
+    assert 1e-7 < error.max() < 1e-3, error.max()
+    np.testing.assert_allclose(result.vector("plant.q")[-1], parameters["q_end"], rtol=0, atol=1e-8)
+    assert np.abs(result.vector("plant.qd")[-1]).max() < 1e-6
+    assert np.all(result["plant.within_limits"] == 1)

@@ -100,9 +100,9 @@ def model(robot):
 # -- the collection ----------------------------------------------------------------------------------
 def test_the_collection_holds_every_block_of_every_robot(fmu_root):
     built = sorted(p.relative_to(fmu_root).as_posix() for p in fmu_root.glob("*/*.fmu"))
-    expected = sorted(f"{r}/{b}.fmu" for r in available() for b in load_description(r).blocks)
+    expected = sorted(f"{r}/{b}.fmu" for r in available() for b in load_description(r).fmu_blocks)
     assert built == expected
-    assert {"chess/ik.fmu", "rrp/ik.fmu", "rrp/fk.fmu", "rpp/fk.fmu"} <= set(built)
+    assert {"chess/ik.fmu", "rrp/ik.fmu", "rrp/fk.fmu", "rpp/fk.fmu", "ur5/trajectory_joint.fmu"} <= set(built)
     assert "rpp/ik.fmu" not in built and "chess/fk.fmu" not in built
 
 
@@ -115,7 +115,7 @@ def test_model_identifiers_are_unique_across_the_collection(fmu_root):
         ids.append(identifier)
         guids.append(root.get("guid"))
     assert len(ids) == len(set(ids)) == len(guids) == len(set(guids)) == sum(
-        len(load_description(r).blocks) for r in available())
+        len(load_description(r).fmu_blocks) for r in available())
 
 
 # -- the model description -----------------------------------------------------------------------------
@@ -259,7 +259,7 @@ def test_vendor_annotation_names_robot_and_block(fmu_root, robot, block):
     (annotation,) = tool.findall("Block")
     description = load_description(robot)
     variant = description.trajectory.kind if block == "trajectory" else ""
-    assert annotation.attrib == {"robot": robot, "kind": block, "variant": variant, "source": SOURCE_HASH,
+    assert annotation.attrib == {"robot": robot, "kind": block, "variant": variant, "profile": "", "source": SOURCE_HASH,
                                  "robot_data": robot_data_hash(description.path, description.urdf),
                                  "python": f"{sys.version_info.major}.{sys.version_info.minor}",
                                  "requirements": "resources/requirements.txt"}

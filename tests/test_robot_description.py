@@ -582,3 +582,26 @@ def test_a_mimic_joint_whose_leader_is_locked_must_be_locked_too(copy_robot):
     with pytest.raises(ValueError, match="joints.locked: joint 'panda_finger_joint2' mimics the locked joint "
                                          "'panda_finger_joint1': lock it too"):
         load_model(description)
+
+
+def test_named_profiles_are_more_trajectory_fmus_each_reading_its_own_table(copy_robot):
+    ur5 = load_description("ur5")
+    assert ur5.fmu_blocks == ur5.blocks + ("trajectory_joint",)
+    kind, profile, described = ur5.block_of("trajectory_joint")
+    assert (kind, profile, described.trajectory) == ("trajectory", "joint", ur5.profiles["joint"])
+    assert described.trajectory.kind == "joint_bangbang" and ur5.trajectory.kind == "pose_line"
+    assert ur5.block_of("ik") == ("ik", "", ur5)
+    block = make_block(described, "trajectory")                 # the joint-space block, its own outputs
+    assert "q_ref[6]" in {v.name for v in block.variables} and "x_ref[1]" not in {v.name for v in block.variables}
+    with pytest.raises(ValueError, match=r"robot 'ur5' has no block 'trajectory_circle'; its blocks: trajectory, "
+                                         r"ik, controller, plant, fk, trajectory_joint"):
+        ur5.block_of("trajectory_circle")
+
+
+@pytest.mark.parametrize("edit, key, problem", [
+    (lambda d: d["trajectories"].update({"Fast-Line": d["trajectories"]["joint"]}), "trajectories.Fast-Line",
+     "a profile's name is lower-case letters, digits and _ (it names an FMU)"),
+    (lambda d: d["trajectories"].update({"slow": {"q_end": [0.0] * 6}}), "trajectories.slow.profile", "missing"),
+])
+def test_named_profiles_are_checked(copy_robot, edit, key, problem):
+    assert problem in refusal(copy_robot("ur5", edit), key)

@@ -87,7 +87,8 @@ class BlockSlave(FastPath, LifeCycle, Outputs, FmuState, Variables, Reporting, F
             raise TypeError(f"{type(self).__name__}: robot_name and block_kind must be set")
         description = self._own_description()
         self.robot_data = robot_data_hash(description.path, description.urdf)
-        self.logic = block_type(description, self.block_kind)(load_model(description))
+        kind, self.profile, description = description.block_of(self.block_kind)   # trajectory_<profile>
+        self.logic = block_type(description, kind)(load_model(description))
         self.logic.logger = self._log_from_block
         self.author = "robofmu"
         self.version = fmu_version(self.robofmu_version or _installed_version(), self.robot_data)
@@ -127,7 +128,7 @@ class BlockSlave(FastPath, LifeCycle, Outputs, FmuState, Variables, Reporting, F
 
     def to_xml(self, model_options=dict()) -> Element:
         """pythonfmu's model description, completed (see :mod:`.model_description`)."""
-        return complete(super().to_xml(model_options), self.logic, self.robot_name, self.block_kind,
+        return complete(super().to_xml(model_options), self.logic, self.robot_name, self.logic.kind, self.profile,
                         self.robot_data)
 
 

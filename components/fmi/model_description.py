@@ -35,10 +35,11 @@ UNITS = {
 VENDOR_TOOL = "robofmu"
 
 
-def complete(root: Element, logic, robot: str, kind: str, robot_data: str = "") -> Element:
+def complete(root: Element, logic, robot: str, kind: str, profile: str = "", robot_data: str = "") -> Element:
     """Complete pythonfmu's ``root`` for block ``logic`` (a :class:`~robofmu.components.blocks.Block`).
 
-    The vendor annotation names robot, kind and variant, the code's hash (``source``:
+    The vendor annotation names robot, kind, variant and profile (a named profile's trajectory
+    FMU: ``[trajectories.<profile>]``; empty otherwise), the code's hash (``source``:
     :data:`~robofmu.components.SOURCE_HASH`) and the hash of the robot's data the FMU carries
     (``robot_data``: :func:`~robofmu.components.robot_data_hash`), what ``robofmu build`` and
     the master compare to tell a stale FMU and why."""
@@ -52,7 +53,7 @@ def complete(root: Element, logic, robot: str, kind: str, robot_data: str = "") 
     root.insert(tags.index("CoSimulation") + 1, units)
     annotations = Element("VendorAnnotations")
     tool = SubElement(annotations, "Tool", name=VENDOR_TOOL)
-    SubElement(tool, "Block", robot=robot, kind=kind, variant=logic.variant, source=SOURCE_HASH,
+    SubElement(tool, "Block", robot=robot, kind=kind, variant=logic.variant, profile=profile, source=SOURCE_HASH,
                robot_data=robot_data, python=PYTHON, requirements="resources/requirements.txt")
     root.insert([c.tag for c in root].index("ModelVariables"), annotations)
 

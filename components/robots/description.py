@@ -51,6 +51,10 @@ Schema (every table but those marked optional is required)::
     profile = "line"                     # a registered profile; its own parameters follow
     ...
 
+    [trajectories.joint]                 # optional: more profiles, each its own trajectory FMU
+    profile = "joint_bangbang"           # (fmus/<robot>/trajectory_joint.fmu); an experiment
+    ...                                  # picks one by its FMU
+
     [ik]                                 # optional (a robot whose trajectory is in joint space has none)
     solver = "spherical"                 # a registered solver; its own parameters follow
     ...
@@ -71,8 +75,9 @@ The robot model class is picked by the description's :attr:`RobotDescription.mod
 from __future__ import annotations
 
 import math
+import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +89,8 @@ __all__ = ["DescriptionError", "Gains", "TaskSpace", "Payload", "Choice", "Plana
 
 #: Blocks a description may list (each built as ``fmus/<robot>/<block>.fmu``).
 KNOWN_BLOCKS = ("trajectory", "ik", "controller", "plant", "fk", "jacobian")
+#: A named profile's trajectory FMU is ``trajectory_<name>``.
+PROFILE_PREFIX = "trajectory_"
 
 
 class DescriptionError(ValueError):
@@ -228,6 +235,9 @@ class RobotDescription:
         IK solver and its parameters; None for robots without an IK block.
     locked : dict of str to float
         Joints of the URDF held at a value (rad, m) and removed from the model (``[joints] locked``).
+    profiles : dict of str to Choice
+        More reference profiles by name (``[trajectories.<name>]``), each built as the FMU
+        ``trajectory_<name>`` (:meth:`fmu_blocks`, :meth:`block_of`).
     joint_limits : dict of str to dict of str to float
         Limits by joint that replace the URDF's (``[joints.limits.<joint>]``: ``lower``, ``upper``
         (rad, m), ``velocity`` (rad/s, m/s), ``effort`` (N.m, N); inf: none).
@@ -253,6 +263,7 @@ class RobotDescription:
     ik: Choice | None
     mechanism: Planar3RRPMechanism | None = None
     locked: dict[str, float] = field(default_factory=dict)
+    profiles: dict[str, Choice] = field(default_factory=dict)
     joint_limits: dict[str, dict[str, float]] = field(default_factory=dict)
     saturate_effort: bool = False
 
@@ -268,6 +279,24 @@ class RobotDescription:
         except KeyError:
             raise ValueError(f"robot {self.name!r} has no configuration {name!r}; known: "
                              f"{', '.join(self.configurations)}") from None
+
+    @property
+    def fmu_blocks(self) -> tuple[str, ...]:
+        """The FMUs this robot gets, by file stem: its ``blocks``, then ``trajectory_<name>`` for
+        each named profile."""
+        return self.blocks + tuple(f"{PROFILE_PREFIX}{name}" for name in self.profiles)
+
+    def block_of(self, fmu_block: str) -> tuple[str, str, "RobotDescription"]:
+        """(block kind, profile name or "", the description the block reads) of one of
+        :attr:`fmu_blocks`: ``trajectory_<name>`` is a trajectory block whose ``[trajectory]``
+        is the profile ``<name>``. ValueError naming the known ones otherwise."""
+        if fmu_block in self.blocks:
+            return fmu_block, "", self
+        name = fmu_block[len(PROFILE_PREFIX):] if fmu_block.startswith(PROFILE_PREFIX) else None
+        if name not in self.profiles:
+            raise ValueError(f"robot {self.name!r} has no block {fmu_block!r}; its blocks: "
+                             f"{', '.join(self.fmu_blocks)}")
+        return "trajectory", name, replace(self, trajectory=self.profiles[name])
 
     def gain_set(self, name: str) -> Gains:
         """A gain set by name; ValueError naming the known ones."""
@@ -453,7 +482,7 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
         raise DescriptionError(path, "(syntax)", str(exc)) from None
     top = _Table(path, data)
     top.unknown({"name", "summary", "urdf", "mechanism", "blocks", "task", "configurations", "gravity",
-                 "payload", "gains", "default_gains", "trajectory", "ik", "joints"})
+                 "payload", "gains", "default_gains", "trajectory", "trajectories", "ik", "joints"})
     name = top.string("name", _REQUIRED)
     if name != path.stem:
         top.fail("name", f"must be the file's name {path.stem!r}, got {name!r}")
@@ -534,6 +563,15 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
     if trajectory_table is not None and "trajectory" not in blocks:
         top.fail("trajectory", "a [trajectory] table is needed exactly when `blocks` lists 'trajectory'")
     trajectory = _choice(trajectory_table, "profile") if trajectory_table is not None else None
+    profiles = {}
+    named = top.table("trajectories", None)
+    if named is not None:
+        if trajectory is None:
+            top.fail("trajectories", "named profiles need the trajectory block and its default [trajectory]")
+        for profile in named.data:
+            if not re.fullmatch(r"[a-z][a-z0-9_]*", profile):
+                named.fail(profile, "a profile's name is lower-case letters, digits and _ (it names an FMU)")
+            profiles[profile] = _choice(named.table(profile, _REQUIRED), "profile")
     ik_table = top.table("ik", None)
     ik = _choice(ik_table, "solver") if ik_table is not None else None
     if ("ik" in blocks) != (ik is not None):
@@ -564,7 +602,7 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
         task=task_space, configurations=configurations, gravity=magnitude,
         gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
         trajectory=trajectory, ik=ik,
-        mechanism=mechanism, locked=locked, joint_limits=limits, saturate_effort=saturate)
+        mechanism=mechanism, locked=locked, profiles=profiles, joint_limits=limits, saturate_effort=saturate)
 
 
 #: The keys of a ``[joints.limits.<joint>]`` table.

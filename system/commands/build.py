@@ -42,7 +42,7 @@ def report_staleness(description, out: Path, missing: bool = False) -> tuple[lis
     from robofmu.system.fmu import stale_reasons
 
     lines, fresh = [], []
-    for block in description.blocks:
+    for block in description.fmu_blocks:
         path = out / description.name / f"{block}.fmu"
         if not path.is_file():
             if missing:
@@ -56,7 +56,7 @@ def report_staleness(description, out: Path, missing: bool = False) -> tuple[lis
             lines.append(f"{path}: stale: {', '.join(reasons)}")
         else:
             fresh.append(block)
-    everything = len(fresh) == len(description.blocks)
+    everything = len(fresh) == len(description.fmu_blocks)
     if fresh:
         lines.append(f"{out / description.name}: up to date: {', '.join(f'{b}.fmu' for b in fresh)}")
     return lines, everything

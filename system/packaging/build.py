@@ -102,7 +102,8 @@ def build(robot: str | Path, out_dir: str | Path = "fmus", blocks: list[str] | N
     out_dir : str or Path
         Root folder of the FMU collection.
     blocks : list of str, optional
-        Subset of the robot's blocks; default all.
+        Subset of the robot's FMUs (:attr:`RobotDescription.fmu_blocks`: its blocks, and a
+        ``trajectory_<name>`` per named profile); default all.
     log : callable
         Progress messages (one line per FMU).
 
@@ -117,7 +118,7 @@ def build(robot: str | Path, out_dir: str | Path = "fmus", blocks: list[str] | N
     """
     description = check_name(load_description(robot))
     name = description.name
-    blocks = list(description.blocks) if blocks is None else blocks
+    blocks = list(description.fmu_blocks) if blocks is None else blocks
     checked(description, log)
     version = robofmu_version()
     export_library = fmi_export.library(log=log)     # first: a missing compiler fails before any FMU
@@ -164,13 +165,14 @@ def checked(description, log=print) -> None:
     ------
     ValueError
         Naming the problem (joint, limit and time for the reference)."""
-    from robofmu.components.preflight import check_reference
+    from robofmu.components.preflight import check_references
 
-    found = check_reference(description)
-    if found is None:
-        return
-    residual = "" if found.ik_residual is None else f", IK residual at most {found.ik_residual:.1e}"
-    margin = "no position limits" if found.position_margin == float("inf") else (
-        f"joints at least {found.position_margin:.3g} from their position limits")
-    log(f"{description.name}: reference checked over {found.duration:g} s ({found.samples} samples): {margin}, "
-        f"at most {found.speed_ratio * 100:.0f} % of their velocity limits{residual}")
+    for profile, found in check_references(description).items():
+        if found is None:
+            continue
+        residual = "" if found.ik_residual is None else f", IK residual at most {found.ik_residual:.1e}"
+        margin = "no position limits" if found.position_margin == float("inf") else (
+            f"joints at least {found.position_margin:.3g} from their position limits")
+        which = f" (profile {profile})" if profile else ""
+        log(f"{description.name}: reference{which} checked over {found.duration:g} s ({found.samples} samples): "
+            f"{margin}, at most {found.speed_ratio * 100:.0f} % of their velocity limits{residual}")

@@ -270,7 +270,7 @@ def fmu_problems(fmu_dir: Path) -> tuple[list[str], list[str], list[Path]]:
     problems, good, counts = [], [], {}
     for robot in available():
         description = load_description(robot)
-        for block in description.blocks:
+        for block in description.fmu_blocks:
             path = fmu_dir / robot / f"{block}.fmu"
             name = f"{robot}/{block}.fmu"
             build = f"robofmu build {robot} --out {fmu_dir}"

@@ -25,6 +25,7 @@ from scipy.integrate import solve_ivp
 from robofmu.components import SOURCE_HASH
 from robofmu.components.blocks import Block, block_class
 from robofmu.components.robots import load_description, load_model
+from robofmu.components.robots.description import PROFILE_PREFIX
 
 from robofmu.system import defaults
 from robofmu.system.check import plan as check_plan, start_values, step_count
@@ -106,6 +107,8 @@ class InProcessDiagram:
                 raise ValueError(f"block {name!r}: {node.path} was built from other robofmu sources "
                                  "than this process runs; rebuild the FMUs (`robofmu build`)")
             description = _description(system, identity["robot"])
+            if identity.get("profile"):                  # a named profile's trajectory FMU
+                description = description.block_of(PROFILE_PREFIX + identity['profile'])[2]
             block = block_class(identity["kind"], identity.get("variant", ""))(load_model(description))
             for variable, value in start_values(node.model_description).items():
                 block.set(variable, value)

@@ -201,3 +201,42 @@ def test_the_controller_clips_efforts_to_their_limits_where_the_description_asks
 def test_a_controller_without_saturation_has_no_flag_and_passes_efforts_on():
     names = {v.name for v in make_block("ur5", "controller").variables}
     assert "saturated" not in names and "tau[1]" in names
+
+
+@pytest.mark.parametrize("robot", ["ur5", "panda"])
+def test_an_arms_pose_path_beyond_a_tightened_limit_is_refused_naming_joint_limit_and_time(copy_robot, robot):
+    """The arm's pose path solved along (its IK at 1 ms, as the build does); the joint that moves
+    most gets an upper (or lower) limit halfway along its travel: the build's check names that
+    joint, the limit and the first sample beyond it."""
+    from robofmu.components.ik import make_solver
+    from robofmu.components.orientation import quaternion_of
+    from robofmu.components.trajectory import PoseLine
+
+    model = load_model(robot)
+    home = model.configuration("home")
+    given = model.description.trajectory.parameters
+    profile = PoseLine(model.fk(home), given["displacement"], quaternion_of(model.rotation(home)), given["rotation"],
+                       given["duration"])
+    solver, solution, path = make_solver(model), None, []
+    times = np.arange(0.0, profile.duration + 5e-4, 1e-3)
+    for t in times:
+        solver.start_from(*((None,) if solution is None else (*solution, 1e-3)))
+        solution = solver.solve(*profile.evaluate(t))
+        path.append(solution[0])
+    travel = np.array(path) - home
+    j = int(np.argmax(np.abs(travel).max(axis=0)))
+    extreme = travel[np.argmax(np.abs(travel[:, j])), j]
+    limit = float(home[j] + extreme / 2)
+    side = "upper" if extreme > 0 else "lower"
+    joint = model.joint_names[j]
+    path = copy_robot(robot, lambda d: d.setdefault("joints", {}).update(limits={joint: {side: limit}}))
+    beyond = (travel[:, j] + home[j] > limit) if extreme > 0 else (travel[:, j] + home[j] < limit)
+    first = times[np.flatnonzero(beyond)[0]]
+    with pytest.raises(ReferenceError) as info:
+        check_reference(read(path))
+    text = info.value.args[0]
+    # a square arm's IK follows the path past the limit (the check names it); a redundant arm's IK
+    # holds the joint on the limit and stops converging there (its message names it): either way
+    # joint, limit and time
+    assert f"t = {first:.6g} s" in text and f"joint {j + 1} ({joint})" in text, text
+    assert f"{side} limit {limit:.6g} rad" in text, text

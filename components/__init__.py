@@ -76,17 +76,22 @@ def source_hash(package_dir: str | Path) -> str:
 SOURCE_HASH = source_hash(_PACKAGE_DIR)
 
 
-def robot_data_hash(toml: str | Path, urdf: str | Path | None = None) -> str:
+def robot_data_hash(toml: str | Path, urdf: str | Path | None = None, tables=()) -> str:
     """SHA-256 over one robot's data, hex: its TOML's bytes, then its URDF's (None: a closed-chain
-    mechanism, described by its TOML alone). File names and folders do not count, so the robot's
-    files where they are described (a URDF perhaps in another distribution) and the copies an FMU
-    carries (``resources/robot/<name>.toml``, ``<name>.urdf``) hash alike."""
+    mechanism, described by its TOML alone), then each CSV table a profile reads (``tables``:
+    paths relative to the TOML, in the description's order). File names and folders do not
+    count, so the robot's files where they are described (a URDF perhaps in another
+    distribution) and the copies an FMU carries (``resources/robot/<name>.toml``, ``<name>.urdf``,
+    the tables beside them) hash alike."""
     digest = hashlib.sha256()
     digest.update(b"toml\0")
     digest.update(Path(toml).read_bytes())
     if urdf is not None:
         digest.update(b"\0urdf\0")
         digest.update(Path(urdf).read_bytes())
+    for table in tables:
+        digest.update(b"\0table\0" + str(table).encode() + b"\0")
+        digest.update((Path(toml).parent / table).read_bytes())
     return digest.hexdigest()
 
 

@@ -341,6 +341,6 @@ def stale_reasons(path: str | Path, robot=None) -> list[str]:
     if robot is not None:
         if robot.name != identity.get("robot"):
             reasons.append(f"built for robot {identity.get('robot')!r}, not {robot.name!r}")
-        elif "robot_data" in identity and identity["robot_data"] != robot_data_hash(robot.path, robot.urdf):
+        elif "robot_data" in identity and identity["robot_data"] != robot_data_hash(robot.path, robot.urdf, robot.tables):
             reasons.append("robot data changed")
     return reasons

@@ -1,6 +1,7 @@
 """Trajectory blocks: the reference a robot follows, from its description's ``[trajectory]``.
 
-``waypoints``: task space, LSPB moves through waypoints with pauses (and gripper events);
+``waypoints``: task space, LSPB moves through waypoints with pauses (and gripper events); the
+waypoints a list of rows, or a CSV table beside the robot's TOML (``waypoints = "path.csv"``);
 ``line``: task space, a straight line at minimum time with a trapezoidal speed;
 ``joint_bangbang``: joint space, the synchronized minimum-time bang-bang;
 ``circle``: task space, once round a circle in the first two task coordinates with an LSPB
@@ -13,9 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from dataclasses import replace
+
 from ..orientation import COMPONENTS, quaternion_of
 from ..parameters import Parameter
-from ..trajectory import Circle, PoseLine, StraightLine, SynchronizedBangBang, WaypointTrajectory
+from ..trajectory import Circle, PoseLine, StraightLine, SynchronizedBangBang, WaypointTrajectory, read_table
 from .base import Block
 from .text import format_matrix, format_vector, parse_matrix, parse_vector
 
@@ -111,6 +114,14 @@ class WaypointsBlock(_Reference):
     )
 
     def declare(self):
+        table = self.description.trajectory.parameters.get("waypoints")
+        if isinstance(table, str):                  # a CSV table beside the robot's TOML
+            try:
+                rows = read_table(self.description.path.parent / table, self.description.task.coordinates)
+            except ValueError as exc:
+                self.table_error("trajectory", "waypoints", str(exc))
+            self.description = replace(self.description, trajectory=replace(
+                self.description.trajectory, parameters={**self.description.trajectory.parameters, "waypoints": rows}))
         vectors, rest = self.given({"waypoints": 0, "durations": 0})
         given = {**vectors, **rest}
         values = self.table_values("trajectory", self.settings_declared, rest)

@@ -89,6 +89,8 @@ __all__ = ["DescriptionError", "Gains", "TaskSpace", "Payload", "Choice", "Plana
 
 #: Blocks a description may list (each built as ``fmus/<robot>/<block>.fmu``).
 KNOWN_BLOCKS = ("trajectory", "ik", "controller", "plant", "fk", "jacobian")
+#: A profile parameter given as a file name with this suffix is a CSV table beside the TOML.
+TABLE_SUFFIX = ".csv"
 #: A named profile's trajectory FMU is ``trajectory_<name>``.
 PROFILE_PREFIX = "trajectory_"
 
@@ -235,6 +237,9 @@ class RobotDescription:
         IK solver and its parameters; None for robots without an IK block.
     locked : dict of str to float
         Joints of the URDF held at a value (rad, m) and removed from the model (``[joints] locked``).
+    tables : tuple of str
+        The CSV tables the profiles read (a profile parameter given as ``"file.csv"``), as paths
+        relative to the TOML: robot data, carried by each FMU beside the TOML.
     profiles : dict of str to Choice
         More reference profiles by name (``[trajectories.<name>]``), each built as the FMU
         ``trajectory_<name>`` (:meth:`fmu_blocks`, :meth:`block_of`).
@@ -264,6 +269,7 @@ class RobotDescription:
     mechanism: Planar3RRPMechanism | None = None
     locked: dict[str, float] = field(default_factory=dict)
     profiles: dict[str, Choice] = field(default_factory=dict)
+    tables: tuple[str, ...] = ()
     joint_limits: dict[str, dict[str, float]] = field(default_factory=dict)
     saturate_effort: bool = False
 
@@ -597,12 +603,25 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
         if not isinstance(saturate, bool):
             joints.fail("saturate_effort", f"must be true or false, got {saturate!r}")
 
+    tables = []
+    for where, choice in [("trajectory", trajectory)] + [(f"trajectories.{k}", v) for k, v in profiles.items()]:
+        for key, value in (choice.parameters.items() if choice is not None else ()):
+            if isinstance(value, str) and value.lower().endswith(TABLE_SUFFIX):
+                table = (path.parent / value)
+                if not table.is_file():
+                    raise DescriptionError(path, f"{where}.{key}", f"no such table {table}")
+                if Path(value).is_absolute() or ".." in Path(value).parts:
+                    raise DescriptionError(path, f"{where}.{key}", "a table lives in the robot's folder: give "
+                                                                   f"its path relative to the TOML, got {value!r}")
+                tables.append(value)
+
     return RobotDescription(
         name=name, summary=top.string("summary", _REQUIRED), path=path, urdf=urdf, blocks=blocks,
         task=task_space, configurations=configurations, gravity=magnitude,
         gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
         trajectory=trajectory, ik=ik,
-        mechanism=mechanism, locked=locked, profiles=profiles, joint_limits=limits, saturate_effort=saturate)
+        mechanism=mechanism, locked=locked, profiles=profiles, tables=tuple(dict.fromkeys(tables)),
+        joint_limits=limits, saturate_effort=saturate)
 
 
 #: The keys of a ``[joints.limits.<joint>]`` table.

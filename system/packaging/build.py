@@ -72,14 +72,19 @@ def check_name(description: RobotDescription) -> RobotDescription:
 
 
 def stage_robot(description: RobotDescription, folder: Path) -> list[Path]:
-    """Copy a robot's data into ``folder`` as an FMU carries it: ``<name>.toml`` and, for a URDF
-    robot, the URDF the description resolved (wherever it lives) as ``<name>.urdf``."""
+    """Copy a robot's data into ``folder`` as an FMU carries it: ``<name>.toml``, for a URDF robot
+    the URDF the description resolved (wherever it lives) as ``<name>.urdf``, and the CSV tables
+    its profiles read at their paths relative to the TOML."""
     folder.mkdir(parents=True, exist_ok=True)
     copies = [folder / f"{description.name}.toml"]
     shutil.copyfile(description.path, copies[0])
     if description.urdf is not None:
         copies.append(folder / f"{description.name}.urdf")
         shutil.copyfile(description.urdf, copies[1])
+    for table in description.tables:
+        copies.append(folder / table)
+        copies[-1].parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(description.path.parent / table, copies[-1])
     return copies
 
 

@@ -216,25 +216,30 @@ class DampedLeastSquaresIK(IKSolver):
         ``self.report`` filled in. It raises nothing: the report says how good the result is."""
         if quaternion is not None and self._pose:
             self._target_rotation = rotation_of(quaternion)
-        q = np.clip(self.start, self.lower, self.upper)
+        lower, upper = self.lower, self.upper
+        q = np.minimum(np.maximum(self.start, lower), upper)
         e, J = self.error(q, x)
+        position, orientation = self._residuals(e)
         iterations = 0
-        while not self._converged(e) and iterations < self.max_iterations:
+        while not (position <= self.position_tolerance and orientation <= self.orientation_tolerance) \
+                and iterations < self.max_iterations:
             scale = max(1.0, float(np.abs(J).max()))
             normal = J @ J.T
             normal.flat[::self.rows + 1] += (CORRECTION_DAMPING * scale) ** 2
             step = J.T @ gesv(normal, e)[2]
             if not math.isfinite(float(step.sum())):
                 break                                   # no finite correction: not converged
-            q = np.clip(q - step, self.lower, self.upper)
+            q -= step
+            np.maximum(q, lower, out=q)
+            np.minimum(q, upper, out=q)
             iterations += 1
             e, J = self.error(q, x)
-        self.at_limit = bool(np.any(q == self.lower) or np.any(q == self.upper))
-        position, orientation = self._residuals(e)
+            position, orientation = self._residuals(e)
+        self.at_limit = bool((q == lower).any() or (q == upper).any())
         self.report["iterations"] = float(iterations)
         self.report["position_residual"] = position
         self.report["orientation_residual"] = orientation
-        self._converged_now = self._converged(e)
+        self._converged_now = position <= self.position_tolerance and orientation <= self.orientation_tolerance
         return q
 
     # -- rate level ----------------------------------------------------------------------------

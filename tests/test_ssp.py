@@ -70,6 +70,8 @@ CONNECTIONS = {
     "rrp-line": 30,             # 3 x 3 + 3 x 3 + 2 x 3 + 3 + 3 (plant.q -> fk.q)
     "rpp-bangbang": 21,         # 3 x 3 + 2 x 3 + 3 + 3
     "3rrp-circle": 33,          # 3 x 3 + 3 x 3 + 2 x 3 + 3 + 3 + 3 (plant.q -> fk.q, jacobian.q)
+    "ur5-pose": 61,             # 3 x 3 + 4 + 3 + 3 (the pose) + 3 x 6 + 2 x 6 + 6 + 6 (plant.q -> fk.q)
+    "panda-pose": 68,           # 3 x 3 + 4 + 3 + 3 (the pose) + 3 x 7 + 2 x 7 + 7 + 7 (plant.q -> fk.q)
 }
 
 
@@ -157,10 +159,11 @@ def joint_diff(a, b, name="plant.q"):
 
 
 # -- the package ------------------------------------------------------------------------------------------
-STOP_TIMES = {"chess-pd": 13.0, "rrp-line": 3.0, "rpp-bangbang": 2.0, "3rrp-circle": 5.0}       # s, the experiments' own
+STOP_TIMES = {"chess-pd": 13.0, "rrp-line": 3.0, "rpp-bangbang": 2.0, "3rrp-circle": 5.0,      # s, the experiments' own
+              "ur5-pose": 3.0, "panda-pose": 3.0}
 #: The SSD's system name of each experiment: an identifier OMSimulator takes (``^[a-zA-Z][a-zA-Z0-9_]*$``)
 SYSTEM_NAMES = {"chess-pd": "chess_pd", "rrp-line": "rrp_line", "rpp-bangbang": "rpp_bangbang",
-                "3rrp-circle": "x3rrp_circle"}
+                "3rrp-circle": "x3rrp_circle", "ur5-pose": "ur5_pose", "panda-pose": "panda_pose"}
 OMSIMULATOR_IDENT = r"[a-zA-Z][a-zA-Z0-9_]*"        # OMSimulator's ComRef::isValidIdent
 
 
@@ -204,7 +207,8 @@ def test_ssd_is_well_formed_with_components_connectors_and_connections(systems, 
         assert plant.find("ssd:Connectors/ssd:Connector[@name='grip']/ssc:Boolean", NS) is not None
     unit = plant.find("ssd:Connectors/ssd:Connector[@name='q[2]']/ssc:Real", NS).get("unit")
     assert unit == load_model(description).joint_units()[1] == {"chess-pd": "rad", "rrp-line": "rad",
-                                                                "rpp-bangbang": "m", "3rrp-circle": "rad"}[name]
+                                                                "rpp-bangbang": "m", "3rrp-circle": "rad",
+                                                                "ur5-pose": "rad", "panda-pose": "rad"}[name]
 
     # every wire expanded to scalar variables (chess: 3 x 3 + 3 x 4 + 2 x 4 + 4 + 2 = 35)
     connections = [(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))

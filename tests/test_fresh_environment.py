@@ -176,7 +176,7 @@ def _sequences(fmu_root):
     families = [(fmu_root / robot / f"{block}.fmu", start) for robot, block, start in FAMILIES]
     everything = sorted(fmu_root.glob("*/*.fmu"))
     random.Random(20261203).shuffle(everything)
-    assert len(everything) == sum(len(load_description(robot).blocks) for robot in available()) >= 29
+    assert len(everything) == sum(len(load_description(robot).fmu_blocks) for robot in available()) >= 29
     return {"families": families, "reversed": families[::-1], "every FMU": [(p, {}) for p in everything]}
 
 

@@ -93,3 +93,22 @@ def refusal(path, key: str) -> str:
     text = str(exc)
     assert text.startswith(f"{path}: {key}: "), text
     return text
+
+
+def independent_model(robot: str):
+    """Pinocchio's model of a URDF robot's file, built here and not through the robot model: its
+    locked joints removed by hand (``pin.buildReducedModel`` at their values). Returns the model
+    and the id of the task frame."""
+    import pinocchio as pin
+
+    from robofmu.components.robots import load_description
+
+    description = load_description(robot)
+    model = pin.buildModelFromUrdf(str(description.urdf))
+    if description.locked:
+        reference = pin.neutral(model)
+        ids = [model.getJointId(name) for name in description.locked]
+        for j, value in zip(ids, description.locked.values()):
+            reference[model.joints[j].idx_q] = value
+        model = pin.buildReducedModel(model, ids, reference)
+    return model, model.getFrameId(description.task.frame)

@@ -17,20 +17,9 @@ from robofmu.system.analysis import tracking_metrics
 from robofmu.system.master import Master
 from robofmu.system.roles import Roles
 
+from robot_files import independent_model
+
 CASES = {"ur5-pose": "ur5", "panda-pose": "panda"}
-
-
-def independent_model(robot: str):
-    """Pinocchio's model of the robot's URDF file, built here; locked joints removed by hand."""
-    description = load_description(robot)
-    model = pin.buildModelFromUrdf(str(description.urdf))
-    if description.locked:
-        reference = pin.neutral(model)
-        ids = [model.getJointId(name) for name in description.locked]
-        for j, value in zip(ids, description.locked.values()):
-            reference[model.joints[j].idx_q] = value
-        model = pin.buildReducedModel(model, ids, reference)
-    return model, model.getFrameId(description.task.frame)
 
 
 @pytest.fixture(scope="module", params=sorted(CASES))

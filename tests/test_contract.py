@@ -50,6 +50,7 @@ from robofmu.system.fmu import FMUInstance, FMUError
 from robofmu.system.packaging.validate import checker_problems, problems_of
 
 from fmu_util import open_block, robot_blocks
+from robot_files import independent_model
 
 ALL = robot_blocks()
 WITH_INPUTS = robot_blocks(kinds=("ik", "controller", "plant", "fk", "jacobian"))
@@ -561,18 +562,12 @@ def closed_form(robot: str, block: str, t: float, inputs: dict) -> dict:
 
 
 def independent_placement(robot: str, q: np.ndarray):
-    """The task frame's placement at q on a Pinocchio model built here from the robot's URDF file,
-    its locked joints removed by hand (not through the robot model)."""
-    d = load_description(robot)
-    full = pin.buildModelFromUrdf(str(d.urdf))
-    reference = pin.neutral(full)
-    ids = [full.getJointId(name) for name in d.locked]
-    for j, value in zip(ids, d.locked.values()):
-        reference[full.joints[j].idx_q] = value
-    reduced = pin.buildReducedModel(full, ids, reference) if ids else full
-    data = reduced.createData()
-    pin.framesForwardKinematics(reduced, data, q)
-    return data.oMf[reduced.getFrameId(d.task.frame)]
+    """The task frame's placement at q on a Pinocchio model built here from the robot's URDF file
+    (:func:`robot_files.independent_model`), not through the robot model."""
+    model, frame = independent_model(robot)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    return data.oMf[frame]
 
 
 def gravity_at_home(robot: str) -> np.ndarray:

@@ -206,10 +206,6 @@ class DampedLeastSquaresIK(IKSolver):
         m = self.m
         return (math.sqrt(sum(v * v for v in values[:m])), math.sqrt(sum(v * v for v in values[m:])))
 
-    def _converged(self, e) -> bool:
-        position, orientation = self._residuals(e)
-        return position <= self.position_tolerance and orientation <= self.orientation_tolerance
-
     def position(self, x, quaternion=None):
         """Joint positions (n,) for position target ``x`` and, for a pose task, orientation target
         ``quaternion`` (x, y, z, w; default: the last one given), with ``self.at_limit`` and

@@ -16,7 +16,7 @@ import numpy as np
 from .blocks import make_block
 from .robots import RobotDescription, load_model
 
-__all__ = ["ReferenceCheck", "check_reference", "check_references"]
+__all__ = ["ReferenceCheck", "ReferenceRefused", "check_reference", "check_references"]
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,7 @@ class ReferenceCheck:
     ik_residual: float | None
 
 
-class ReferenceError(ValueError):
+class ReferenceRefused(ValueError):
     """The reference leaves the workspace or the joints' limits; the message names joint, limit, time."""
 
 
@@ -58,8 +58,8 @@ def check_references(description: RobotDescription, step_size: float = 1e-3) -> 
         if kind == "trajectory":
             try:
                 found[profile] = check_reference(described, step_size)
-            except ReferenceError as exc:
-                raise ReferenceError(f"profile {profile!r}: {exc}" if profile else str(exc)) from None
+            except ReferenceRefused as exc:
+                raise ReferenceRefused(f"profile {profile!r}: {exc}" if profile else str(exc)) from None
     if not found:
         check_reference(description, step_size)        # home within the limits
     return found
@@ -72,7 +72,7 @@ def check_reference(description: RobotDescription, step_size: float = 1e-3) -> R
 
     Raises
     ------
-    ReferenceError
+    ReferenceRefused
         Naming the joint, the limit and the time of the first violation, or the time the IK
         found no solution.
     """
@@ -110,7 +110,7 @@ def check_reference(description: RobotDescription, step_size: float = 1e-3) -> R
                 ik.set(name, trajectory.get(name))
             ik.output(t)
             if not ik.get("reachable"):
-                raise ReferenceError(f"the IK finds no solution for the reference at t = {t:.6g} s: {ik.reason}")
+                raise ReferenceRefused(f"the IK finds no solution for the reference at t = {t:.6g} s: {ik.reason}")
             ik.advance(t, step_size)
             q = np.array([ik.get(f"q_ref[{j + 1}]") for j in range(robot.n)])
             qd = np.array([ik.get(f"qd_ref[{j + 1}]") for j in range(robot.n)])
@@ -120,7 +120,7 @@ def check_reference(description: RobotDescription, step_size: float = 1e-3) -> R
         fastest = int(np.argmax(np.abs(qd) / speed))
         if abs(qd[fastest]) > speed[fastest]:
             unit = robot.joint_units(1)[fastest]
-            raise ReferenceError(f"the reference at t = {t:.6g} s drives joint {fastest + 1} "
+            raise ReferenceRefused(f"the reference at t = {t:.6g} s drives joint {fastest + 1} "
                                  f"({robot.joint_names[fastest]}) at {qd[fastest]:.6g} {unit}, beyond its velocity "
                                  f"limit {speed[fastest]:.6g} {unit}")
         margin = min(margin, float(np.min(np.minimum(q - lower, upper - q))))
@@ -134,5 +134,5 @@ def _within(robot, q, lower, upper, where: str) -> None:
         j = int(outside[0])
         unit = robot.joint_units(0)[j]
         side, limit = ("lower", lower[j]) if q[j] < lower[j] else ("upper", upper[j])
-        raise ReferenceError(f"{where} puts joint {j + 1} ({robot.joint_names[j]}) at {q[j]:.6g} {unit}, "
+        raise ReferenceRefused(f"{where} puts joint {j + 1} ({robot.joint_names[j]}) at {q[j]:.6g} {unit}, "
                              f"beyond its {side} limit {limit:.6g} {unit}")

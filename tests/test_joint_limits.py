@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from robofmu.components.blocks import make_block
-from robofmu.components.preflight import ReferenceError, check_reference
+from robofmu.components.preflight import ReferenceRefused, check_reference
 from robofmu.components.robots import load_description, load_model
 from robofmu.components.robots.description import DescriptionError, read
 from robofmu.components.trajectory import SynchronizedBangBang
@@ -40,7 +40,7 @@ def test_a_reference_beyond_a_position_limit_is_refused_naming_joint_limit_and_t
     path = copy_robot("rpp", lambda d: set_key(d, "joints", {"limits": {joint: {"upper": 1.5}}}))
     times, q, _ = _rpp_reference()
     first = times[np.flatnonzero(q[:, 1] > 1.5)[0]]          # the first sample beyond it
-    with pytest.raises(ReferenceError, match=re.escape(
+    with pytest.raises(ReferenceRefused, match=re.escape(
             f"the reference at t = {first:.6g} s puts joint 2 ({joint}) at ")) as info:
         check_reference(read(path))
     assert info.value.args[0].endswith("m, beyond its upper limit 1.5 m")
@@ -51,7 +51,7 @@ def test_a_reference_beyond_a_velocity_limit_is_refused_naming_joint_limit_and_t
     path = copy_robot("rpp", lambda d: set_key(d, "joints", {"limits": {joint: {"velocity": 1.0}}}))
     times, _, qd = _rpp_reference()
     first = times[np.flatnonzero(np.abs(qd[:, 0]) > 1.0)[0]]
-    with pytest.raises(ReferenceError, match=re.escape(
+    with pytest.raises(ReferenceRefused, match=re.escape(
             f"the reference at t = {first:.6g} s drives joint 1 ({joint}) at ")) as info:
         check_reference(read(path))
     assert info.value.args[0].endswith("rad/s, beyond its velocity limit 1 rad/s")
@@ -62,14 +62,14 @@ def test_a_task_reference_the_ik_cannot_follow_is_refused_naming_the_time(copy_r
     sample where the Newton-Raphson IK finds no solution."""
     path = copy_robot("planar2r", lambda d: set_key(d, "trajectory.waypoints",
                                                     [d["trajectory"]["waypoints"][0], [1.6, 0.6], [0.6, 1.2]]))
-    with pytest.raises(ReferenceError, match=r"the IK finds no solution for the reference at t = 0\.\d+ s: "):
+    with pytest.raises(ReferenceRefused, match=r"the IK finds no solution for the reference at t = 0\.\d+ s: "):
         check_reference(read(path))
 
 
 def test_home_beyond_a_limit_is_refused(copy_robot):
     joint = load_model("panda").joint_names[3]
     path = copy_robot("panda", lambda d: set_key(d, "joints.limits", {joint: {"upper": -2.5}}))
-    with pytest.raises(ReferenceError, match=re.escape(
+    with pytest.raises(ReferenceRefused, match=re.escape(
             f"configuration home puts joint 4 ({joint}) at -2.35619 rad, beyond its upper limit -2.5 rad")):
         check_reference(read(path))
 
@@ -232,7 +232,7 @@ def test_an_arms_pose_path_beyond_a_tightened_limit_is_refused_naming_joint_limi
     path = copy_robot(robot, lambda d: d.setdefault("joints", {}).update(limits={joint: {side: limit}}))
     beyond = (travel[:, j] + home[j] > limit) if extreme > 0 else (travel[:, j] + home[j] < limit)
     first = times[np.flatnonzero(beyond)[0]]
-    with pytest.raises(ReferenceError) as info:
+    with pytest.raises(ReferenceRefused) as info:
         check_reference(read(path))
     text = info.value.args[0]
     # a square arm's IK follows the path past the limit (the check names it); a redundant arm's IK

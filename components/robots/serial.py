@@ -143,7 +143,6 @@ class SerialRobot(RobotModel):
         self._rows = slice(first, first + self.m) if consecutive else self._axes
         self.orientation_axes = tuple(description.task.orientation_axes)
         self._orientation_rows = list(self.orientation_axes)
-        self._pose_jacobian = np.zeros((self.task_rows, self.n))
         self._direction = np.array(description.gravity_direction)
         self.set_gravity(description.gravity if gravity is None else gravity)
         self.payload = 0.0
@@ -249,14 +248,11 @@ class SerialRobot(RobotModel):
         return placement.translation.copy(), rotation, J
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        J = pin.computeFrameJacobian(self.model, self.data, q, self.task_id, pin.LOCAL_WORLD_ALIGNED)
         if not self.orientation_axes:
-            return J[self._rows]
-        out = self._pose_jacobian
-        out[:self.m] = J[self._rows]
-        rotation = self.data.oMf[self.task_id].rotation       # angular rows about the frame's own axes
-        out[self.m:] = (rotation.T @ J[3:])[self._orientation_rows]
-        return out.copy()
+            return pin.computeFrameJacobian(self.model, self.data, q, self.task_id,
+                                            pin.LOCAL_WORLD_ALIGNED)[self._rows]
+        full = self.kinematics(q)[2]                          # angular rows about the frame's own axes
+        return np.vstack([full[self._rows], full[3:][self._orientation_rows]])
 
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q, qd, self._zero)

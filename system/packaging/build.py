@@ -163,8 +163,9 @@ def checked(description, log=print) -> None:
     """What the run would otherwise discover, checked before any FMU is built: the robot's model
     loads (URDF, locked joints, limits, task frame, home), its IK solver accepts the task, and its
     reference trajectory, sampled at the default communication step and solved by its IK, stays
-    inside the joints' position and velocity limits (:func:`robofmu.components.preflight.check_reference`).
-    One line of what was found goes to ``log``.
+    inside the joints' position and velocity limits, every named profile too
+    (:func:`robofmu.components.preflight.check_references`). One line of what was found per profile
+    goes to ``log``.
 
     Raises
     ------

@@ -1,11 +1,11 @@
 """Trajectory profiles: LSPB through waypoints, a straight line with a trapezoidal speed profile,
-a synchronized minimum-time bang-bang in joint space, a task-space circle run once with an
-LSPB phase, and a task-space pose line (:class:`PoseLine`: position along a straight line,
-orientation by slerp along the shortest rotation, both on one LSPB time law).
+a synchronized minimum-time bang-bang in joint space and a task-space circle run once with an
+LSPB phase; the time laws they share (:class:`LSPBLaw`, :class:`TrapezoidLaw`, :func:`schedule`).
+Pose profiles (orientation too) are in :mod:`.pose_trajectory`.
 
 Every profile has ``dim``, ``duration``, ``breakpoints`` (the instants where its acceleration
-jumps) and ``evaluate(t, snap=True) -> (x, xd, xdd)`` (:class:`PoseLine`: six arrays, with the
-orientation and its rates); it rests at its start before 0 and at its end from ``duration`` on. At a breakpoint the value is the one that holds after it (the start
+jumps) and ``evaluate(t, snap=True) -> (x, xd, xdd)``; it rests at its start before 0 and at its
+end from ``duration`` on. At a breakpoint the value is the one that holds after it (the start
 instant already accelerates; the end instant is at rest), as a sampled block holds it.
 
 LSPB: 
@@ -21,7 +21,6 @@ import math
 
 import numpy as np
 
-from .orientation import UNIT_TOLERANCE
 
 
 def lspb(x0: np.ndarray, x1: np.ndarray, T: float, t: float, cruise_factor: float = 1.5):
@@ -99,6 +98,108 @@ class _LSPBPiece:
             xdd[:] = self.minus_a
 
 
+class LSPBLaw:
+    """A time law s(t) from 0 to 1 in ``duration`` by LSPB (cruise rate ``cruise_factor`` x the
+    mean rate), at rest at both ends, in float arithmetic: :func:`lspb` of one coordinate.
+
+    Attributes
+    ----------
+    duration : float
+        s.
+    breakpoints : ndarray
+        The instants (s) where sdd jumps: 0, the blend ends, ``duration``.
+    peak_rate, peak_acceleration : float
+        The largest sd (1/s) and |sdd| (1/s^2).
+
+    Raises
+    ------
+    ValueError
+        Naming ``duration`` or ``cruise_factor``.
+    """
+
+    def __init__(self, duration: float, cruise_factor: float = 1.5):
+        self.duration = _positive(duration, "duration", "s")
+        if not (1.0 < cruise_factor <= 2.0):
+            raise ValueError(f"cruise_factor: must lie in (1, 2], got {cruise_factor}")
+        self.cruise_factor = float(cruise_factor)
+        piece = _LSPBPiece(np.zeros(1), np.ones(1), self.duration, self.cruise_factor)
+        problem = piece.overflow()
+        if problem is not None:
+            what, _, value = problem
+            raise ValueError(f"duration = {_g(self.duration)} s is too short: the time law's {what} would be "
+                             f"{_g(value)} (not finite); give a longer duration")
+        self.tb = piece.tb
+        self.peak_rate, self.peak_acceleration = float(piece.V[0]), float(piece.a[0])
+        self._half_a, self._cruise_start = float(piece.half_a[0]), float(piece.cruise_start[0])
+        self.breakpoints = np.unique([0.0, self.tb, self.duration - self.tb, self.duration])
+
+    def path(self, t: float) -> tuple[float, float, float]:
+        """s, sd (1/s), sdd (1/s^2) at ``t``; 0 before the start, 1 from ``duration`` on."""
+        T, tb = self.duration, self.tb
+        if t < 0.0 or t >= T:
+            return (0.0 if t < 0.0 else 1.0), 0.0, 0.0
+        a, v = self.peak_acceleration, self.peak_rate
+        if t < tb:
+            return self._half_a * t * t, a * t, a
+        if t <= T - tb:
+            return self._cruise_start + v * (t - tb), v, 0.0
+        r = T - t
+        return 1.0 - self._half_a * r * r, a * r, -a
+
+
+class TrapezoidLaw:
+    """A time law s(t) from 0 to ``length`` at minimum time under a rate and an acceleration
+    limit: a trapezoidal rate profile.
+
+    It accelerates at a_max to v_max (at t1 = v_max / a_max), cruises, and decelerates to rest at
+    T = length / v_max + t1. If ``length`` is too short to reach v_max (length < v_max^2 / a_max)
+    the profile is triangular: t1 = T / 2 = sqrt(length / a_max), peak rate a_max t1. v_max may be
+    infinite (a triangle at a_max).
+
+    Attributes
+    ----------
+    duration, t1 : float
+        The time to the end and of each ramp (s).
+    peak_rate, peak_acceleration : float
+        The cruise rate a_max t1 and a_max (s's unit per s, per s^2).
+    finite : bool
+        Whether every number of the law is finite (the caller refuses one that is not, naming
+        its own parameters).
+    """
+
+    def __init__(self, length: float, v_max: float, a_max: float):
+        self.length, self.v_max, self.a_max = float(length), float(v_max), float(a_max)
+        try:
+            reach = self.v_max ** 2 / self.a_max        # the length the ramps up to v_max and down take
+        except OverflowError:
+            reach = math.inf
+        with np.errstate(all="ignore"):
+            if self.length >= reach:
+                self.t1 = self.v_max / self.a_max
+                self.duration = self.length / self.v_max + self.t1
+            else:
+                self.t1 = float(np.sqrt(self.length / self.a_max))
+                self.duration = 2.0 * self.t1
+            self.peak_rate = self.a_max * self.t1
+            self.peak_acceleration = self.a_max
+            self.finite = _finite(self.duration, self.t1, self.peak_rate, 0.5 * self.a_max * self.t1 * self.t1)
+            self.breakpoints = np.unique([0.0, self.t1, self.duration - self.t1, self.duration])
+
+    def path(self, t: float) -> tuple[float, float, float]:
+        """s, sd, sdd at ``t``; 0 before the start, ``length`` from ``duration`` on."""
+        T, t1, a = self.duration, self.t1, self.a_max
+        if t < 0.0:
+            return 0.0, 0.0, 0.0
+        if t >= T:
+            return self.length, 0.0, 0.0
+        if t < t1:
+            return 0.5 * a * t * t, a * t, a
+        if t <= T - t1:
+            return 0.5 * a * t1 * t1 + self.peak_rate * (t - t1), self.peak_rate, 0.0
+        r = T - t
+        return self.length - 0.5 * a * r * r, a * r, -a
+
+
 #: Communication points within this many seconds of a breakpoint are evaluated at it.
 SNAP_TOLERANCE = 1e-9
 
@@ -162,6 +263,62 @@ class _Profile:
         raise NotImplementedError
 
 
+def schedule(durations, pause: float, moves: int) -> tuple[list[tuple[float, float, int]], float]:
+    """The timeline of ``moves`` moves with a ``pause`` after every move but the last.
+
+    Parameters
+    ----------
+    durations : array_like, shape (moves,)
+        Each move's duration (s), > 0.
+    pause : float
+        Rest between two moves (s), >= 0.
+    moves : int
+        The number of moves (legs between waypoints).
+
+    Returns
+    -------
+    segments : list of (start, end, move)
+        Each move or pause: its start and end (s) and its 1-based move number (0 for a pause).
+    duration : float
+        The end of the last move (s).
+
+    Raises
+    ------
+    ValueError
+        Naming ``durations`` or ``pause``: a count other than ``moves``, a duration that is not
+        positive and finite, a move or pause lost in rounding, a total beyond the largest float.
+    """
+    d = np.asarray(durations, dtype=float)
+    if d.ndim != 1 or d.shape[0] != moves:
+        raise ValueError(f"durations: need one duration per move ({moves}), got {d.shape[0] if d.ndim == 1 else d.shape}")
+    if not np.all(np.isfinite(d)) or np.any(d <= 0.0):
+        raise ValueError(
+            f"durations: every move must take a positive, finite time (waypoint times strictly increasing), got {d.tolist()}")
+    if not (np.isfinite(pause) and pause >= 0.0):
+        raise ValueError(f"pause: must be >= 0 s, got {pause}")
+    segments, t = [], 0.0
+    with np.errstate(all="ignore"):
+        for i in range(moves):
+            segments.append((t, t + d[i], i + 1))
+            if segments[-1][1] == t and math.isfinite(t):
+                raise ValueError(f"durations: move {i + 1} of {_g(d[i])} s starts at t = {_g(t)} s, where so short "
+                                 "a time is lost in rounding (the earlier durations and pauses are too long "
+                                 "beside it); give the earlier moves and pauses less time or this one more")
+            t += d[i]
+            if i < moves - 1 and pause > 0.0:
+                segments.append((t, t + pause, 0))
+                if segments[-1][1] == t and math.isfinite(t):
+                    raise ValueError(f"pause = {_g(pause)} s is lost in rounding at t = {_g(t)} s (the durations "
+                                     "are too long beside it); give a longer pause or shorter durations")
+                t += pause
+    if not math.isfinite(t):
+        with np.errstate(all="ignore"):
+            total = d.sum()
+        raise ValueError(f"durations, pause: the moves ({_g(total)} s in all) and pauses ({_g(pause)} s each) "
+                         f"add up to {_g(t)} s, beyond the largest float; give shorter durations or pauses")
+    return [(float(a), float(b), m) for a, b, m in segments], float(t)
+
+
 @dataclass(frozen=True)
 class Segment:
     start: float   # s
@@ -197,22 +354,14 @@ class WaypointTrajectory(_Profile):
     def __init__(self, waypoints, durations, pause: float = 0.0, cruise_factor: float = 1.5,
                  grip_close_after_move: int = 0, grip_open_after_move: int = 0):
         w = np.asarray(waypoints, dtype=float)
-        d = np.asarray(durations, dtype=float)
         if w.ndim != 2 or w.shape[0] < 2:
             raise ValueError(f"waypoints: need at least two points of equal dimension, got shape {w.shape}")
         if not np.all(np.isfinite(w)):
             raise ValueError("waypoints: every coordinate must be finite")
-        if d.ndim != 1 or d.shape[0] != w.shape[0] - 1:
-            raise ValueError(
-                f"durations: need one duration per move ({w.shape[0] - 1}), got {d.shape[0] if d.ndim == 1 else d.shape}")
-        if not np.all(np.isfinite(d)) or np.any(d <= 0.0):
-            raise ValueError(
-                f"durations: every move must take a positive, finite time (waypoint times strictly increasing), got {d.tolist()}")
-        if not (np.isfinite(pause) and pause >= 0.0):
-            raise ValueError(f"pause: must be >= 0 s, got {pause}")
+        k = w.shape[0] - 1
+        timeline, t = schedule(durations, pause, k)
         if not (1.0 < cruise_factor <= 2.0):
             raise ValueError(f"cruise_factor: must lie in (1, 2], got {cruise_factor}")
-        k = d.shape[0]
         for name, move in (("grip_close_after_move", grip_close_after_move),
                            ("grip_open_after_move", grip_open_after_move)):
             if not (0 <= move <= k):
@@ -224,30 +373,14 @@ class WaypointTrajectory(_Profile):
             raise ValueError(f"grip_open_after_move = {grip_open_after_move} must come after "
                              f"grip_close_after_move = {grip_close_after_move}")
         self.waypoints = w
-        self.durations = d
+        self.durations = np.asarray(durations, dtype=float)
         self.pause = float(pause)
         self.cruise_factor = float(cruise_factor)
         self.dim = w.shape[1]
-        segments, t = [], 0.0
-        with np.errstate(all="ignore"):
-            for i in range(k):
-                segments.append(Segment(t, t + d[i], w[i], w[i + 1], i + 1))
-                if segments[-1].end == t and math.isfinite(t):
-                    raise ValueError(f"durations: move {i + 1} of {_g(d[i])} s starts at t = {_g(t)} s, where so short "
-                                     "a time is lost in rounding (the earlier durations and pauses are too long "
-                                     "beside it); give the earlier moves and pauses less time or this one more")
-                t += d[i]
-                if i < k - 1 and pause > 0.0:
-                    segments.append(Segment(t, t + pause, w[i + 1], w[i + 1], 0))
-                    if segments[-1].end == t and math.isfinite(t):
-                        raise ValueError(f"pause = {_g(pause)} s is lost in rounding at t = {_g(t)} s (the durations "
-                                         "are too long beside it); give a longer pause or shorter durations")
-                    t += pause
-        if not math.isfinite(t):
-            with np.errstate(all="ignore"):
-                total = d.sum()
-            raise ValueError(f"durations, pause: the moves ({_g(total)} s in all) and pauses ({_g(pause)} s each) "
-                             f"add up to {_g(t)} s, beyond the largest float; give shorter durations or pauses")
+        segments = []
+        for start, end, move in timeline:
+            row = move or segments[-1].move          # a pause rests where the move before it ended
+            segments.append(Segment(start, end, w[row - 1] if move else w[row], w[row], move))
         self.segments = segments
         self.duration = t
         self.move_ends = np.array([s.end for s in segments if s.move])
@@ -312,10 +445,9 @@ class WaypointTrajectory(_Profile):
 class StraightLine(_Profile):
     """A straight line at minimum time under speed and acceleration limits (trapezoidal speed).
 
-    The path s(t) runs from 0 to ``length`` along ``direction``: it accelerates at a_max to
-    v_max (at t1 = v_max / a_max), cruises, and decelerates to rest at T = length / v_max + t1.
-    If the line is too short to reach v_max (length < v_max^2 / a_max) the profile is
-    triangular: t1 = T / 2 = sqrt(length / a_max), peak speed a_max t1.
+    The arc length s(t) runs from 0 to ``length`` along ``direction`` by :class:`TrapezoidLaw`:
+    ramps at a_max up to v_max and down, or a triangle at a_max for a line too short to reach
+    v_max.
 
     Parameters
     ----------
@@ -344,19 +476,10 @@ class StraightLine(_Profile):
         self.v_max = _positive(v_max, "v_max", "m/s")
         self.a_max = _positive(a_max, "a_max", "m/s2")
         self.dim = len(self.start)
-        try:
-            reach = self.v_max ** 2 / self.a_max        # the length the ramps up to v_max and down take
-        except OverflowError:
-            reach = math.inf
-        if self.length >= reach:
-            self.t1 = self.v_max / self.a_max
-            self.duration = self.length / self.v_max + self.t1
-        else:
-            self.t1 = float(np.sqrt(self.length / self.a_max))
-            self.duration = 2.0 * self.t1
-        self.v_peak = self.a_max * self.t1
+        self.law = TrapezoidLaw(self.length, self.v_max, self.a_max)
+        self.t1, self.duration, self.v_peak = self.law.t1, self.law.duration, self.law.peak_rate
         limits = f"length = {_g(self.length)} m, v_max = {_g(self.v_max)} m/s, a_max = {_g(self.a_max)} m/s2"
-        if not _finite(self.duration, self.t1, self.v_peak, 0.5 * self.a_max * self.t1 * self.t1):
+        if not self.law.finite:
             raise ValueError(f"{limits}: the line would take {_g(self.duration)} s (ramps of {_g(self.t1)} s, "
                              f"peak speed {_g(self.v_peak)} m/s), not finite; give a shorter length or larger "
                              "v_max and a_max")
@@ -366,22 +489,12 @@ class StraightLine(_Profile):
             k = int(np.flatnonzero(~np.isfinite(self.end))[0])
             raise ValueError(f"start[{k + 1}] = {_g(self.start[k])} and length = {_g(self.length)} m: the end "
                              f"point's coordinate {k + 1} would be {_g(self.end[k])} (beyond the largest float)")
-        self.breakpoints = np.unique([0.0, self.t1, self.duration - self.t1, self.duration])
+        self.breakpoints = self.law.breakpoints
         self._break_list = self.breakpoints.tolist()
 
     def path(self, t: float) -> tuple[float, float, float]:
         """Arc length (m), speed (m/s) and acceleration (m/s^2) along the line at ``t``."""
-        T, t1, a = self.duration, self.t1, self.a_max
-        if t < 0.0:
-            return 0.0, 0.0, 0.0
-        if t >= T:
-            return self.length, 0.0, 0.0
-        if t < t1:
-            return 0.5 * a * t * t, a * t, a
-        if t <= T - t1:
-            return 0.5 * a * t1 * t1 + self.v_peak * (t - t1), self.v_peak, 0.0
-        r = T - t
-        return self.length - 0.5 * a * r * r, a * r, -a
+        return self.law.path(t)
 
     def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
                       snap: bool = True) -> None:
@@ -605,172 +718,6 @@ class Circle(_Profile):
                 x[i] = offset + amplitude * sin_phi
                 xd[i] = amplitude * cos_phi * w
                 xdd[i] = amplitude * (cos_phi * alpha - sin_phi * w * w)
-
-
-class PoseLine(_Profile):
-    """A task-space pose move: the frame origin on a straight line, the orientation by slerp
-    along the shortest rotation, both driven by one LSPB time law.
-
-    One scalar s(t) runs from 0 to 1 in ``duration`` by LSPB (cruise speed ``cruise_factor`` x
-    the mean speed), at rest at both ends. With d = ``displacement``, r = ``rotation`` (in the
-    start frame) and R0 the start orientation:
-
-        p(t) = start + s d,          pd = sd d,           pdd = sdd d,
-        R(t) = R0 Exp(s r),          omega = sd R0 r,     omegad = sdd R0 r,
-
-    so R runs from R0 to R1 = R0 Exp(r) about a fixed axis: slerp from R0 to R1. omega and
-    omegad are in the world frame (dR/dt = [omega]x R). The quaternion (x, y, z, w) is
-    q(t) = q0 (x) (u sin(s |r| / 2), cos(s |r| / 2)), u = r / |r|: it starts at ``start_quaternion``
-    (normalised) and never changes sign. Before 0 the pose rests at its start, from
-    ``duration`` on at its end.
-
-    Parameters
-    ----------
-    start : array_like, shape (3,)
-        Start position of the frame origin (m), world frame.
-    displacement : array_like, shape (3,)
-        Straight-line displacement of the origin (m), world frame; may be zero.
-    start_quaternion : array_like, shape (4,)
-        Start orientation (frame relative to world) as a unit quaternion (x, y, z, w), scalar
-        last (scipy's ``Rotation.as_quat``, Pinocchio's ``Quaternion.coeffs()``); its norm must
-        be within 1e-6 of 1 (it is normalised here).
-    rotation : array_like, shape (3,)
-        Rotation vector (axis times angle, rad) in the start frame (the tool's own axes): the end
-        orientation is R0 Exp(rotation). Its angle must be <= pi (the shortest rotation); may be
-        zero.
-    duration : float
-        > 0 (s).
-    cruise_factor : float
-        In (1, 2].
-
-    Raises
-    ------
-    ValueError
-        Naming the offending argument.
-    """
-
-    dim = 3
-
-    def __init__(self, start, displacement, start_quaternion, rotation, duration: float,
-                 cruise_factor: float = 1.5):
-        self.start = _finite_vector(start, "start", 3)
-        self.displacement = _finite_vector(displacement, "displacement", 3)
-        q0 = _finite_vector(start_quaternion, "start_quaternion", 4)
-        norm = float(np.linalg.norm(q0))
-        if not abs(norm - 1.0) <= UNIT_TOLERANCE:
-            raise ValueError(f"start_quaternion: must be a unit quaternion (x, y, z, w) (norm within "
-                             f"{_g(UNIT_TOLERANCE)} of 1), got {q0.tolist()} of norm {_g(norm)}")
-        self.start_quaternion = q0 / norm
-        self.rotation = _finite_vector(rotation, "rotation", 3)
-        self.angle = float(np.linalg.norm(self.rotation))
-        if self.angle > math.pi + 1e-12:          # pi itself, within rounding of the vector's norm
-            shorter = self.rotation * (1.0 - 2.0 * math.pi / self.angle) if self.angle < 2.0 * math.pi else None
-            hint = f" (here {[round(v, 6) for v in shorter.tolist()]})" if shorter is not None else ""
-            raise ValueError(f"rotation: its angle |rotation| = {_g(self.angle)} rad exceeds pi; give the shortest "
-                             f"rotation to the same end orientation, angle <= pi{hint}")
-        self.duration = _positive(duration, "duration", "s")
-        if not (1.0 < cruise_factor <= 2.0):
-            raise ValueError(f"cruise_factor: must lie in (1, 2], got {cruise_factor}")
-        self.cruise_factor = float(cruise_factor)
-        self._s = _LSPBPiece(np.zeros(1), np.ones(1), self.duration, self.cruise_factor)
-        tb = self._s.tb
-        self.breakpoints = np.unique([0.0, tb, self.duration - tb, self.duration])
-        self._break_list = self.breakpoints.tolist()
-        self._s_values = (np.zeros(1), np.zeros(1), np.zeros(1))
-
-        # orientation constants: q0 (x) (u sin h, cos h) = (A sin h + v0 cos h, w0 cos h + B sin h)
-        v0, w0 = self.start_quaternion[:3], float(self.start_quaternion[3])
-        u = self.rotation / self.angle if self.angle > 0.0 else np.zeros(3)
-        self._v0, self._w0 = tuple(v0.tolist()), w0
-        self._a = tuple((w0 * u + np.cross(v0, u)).tolist())
-        self._b = -float(v0 @ u)
-        r = self.rotation                         # R0 r = r + 2 w0 (v0 x r) + 2 v0 x (v0 x r)
-        c = np.cross(v0, r)
-        self.world_rotation = r + 2.0 * w0 * c + 2.0 * np.cross(v0, c)
-        with np.errstate(all="ignore"):
-            self.end = self.start + self.displacement
-        self.end_quaternion = np.empty(4)
-        self._quaternion_into(1.0, self.end_quaternion)
-        self._check_finite()
-
-    def _check_finite(self) -> None:
-        """Refuse parameters whose reference overflows (ValueError naming them): the time law's
-        rate and acceleration (duration), the end point (start, displacement), the peak speeds
-        and accelerations (displacement, rotation with duration)."""
-        problem = self._s.overflow()
-        if problem is not None:
-            what, _, value = problem
-            raise ValueError(f"duration = {_g(self.duration)} s is too short: the time law's {what} would be "
-                             f"{_g(value)} (not finite); give a longer duration")
-        if not _finite(self.end):
-            k = int(np.flatnonzero(~np.isfinite(self.end))[0])
-            raise ValueError(f"start[{k + 1}] = {_g(self.start[k])} and displacement[{k + 1}] = "
-                             f"{_g(self.displacement[k])} m: the end point's coordinate {k + 1} would be "
-                             f"{_g(self.end[k])} (beyond the largest float)")
-        sd, sdd = abs(float(self._s.V[0])), abs(float(self._s.a[0]))      # peak rate, acceleration of s
-        with np.errstate(all="ignore"):
-            peaks = {"displacement": (self.displacement, "m/s", "m/s2"),
-                     "rotation": (self.world_rotation, "rad/s", "rad/s2")}
-            for name, (vector, v_unit, a_unit) in peaks.items():
-                length = float(np.linalg.norm(vector))
-                if not _finite(length * sd, length * sdd):
-                    raise ValueError(f"{name} and duration = {_g(self.duration)} s: the peak speed would be "
-                                     f"{_g(length * sd)} {v_unit} and acceleration {_g(length * sdd)} {a_unit} "
-                                     f"(not finite); give a smaller {name} or a longer duration")
-
-    def path(self, t: float) -> tuple[float, float, float]:
-        """s, sd (1/s), sdd (1/s^2) at ``t``: LSPB from 0 to 1, at rest outside."""
-        if t < 0.0 or t >= self.duration:
-            return (0.0 if t < 0.0 else 1.0), 0.0, 0.0
-        s, sd, sdd = self._s_values
-        self._s.evaluate_into(t, s, sd, sdd)
-        return float(s[0]), float(sd[0]), float(sdd[0])
-
-    def _quaternion_into(self, s: float, quaternion: np.ndarray) -> None:
-        """q0 (x) (u sin(s |r| / 2), cos(s |r| / 2)) written into ``quaternion`` (x, y, z, w)."""
-        h = 0.5 * s * self.angle
-        sin_h, cos_h = math.sin(h), math.cos(h)
-        (ax, ay, az), (vx, vy, vz) = self._a, self._v0
-        quaternion[0] = ax * sin_h + vx * cos_h
-        quaternion[1] = ay * sin_h + vy * cos_h
-        quaternion[2] = az * sin_h + vz * cos_h
-        quaternion[3] = self._w0 * cos_h + self._b * sin_h
-
-    def evaluate(self, t: float, snap: bool = True):
-        """Position (m), velocity (m/s), acceleration (m/s^2), quaternion (x, y, z, w), angular
-        velocity (rad/s) and angular acceleration (rad/s^2, both world frame) at time ``t`` (s):
-        new arrays of shapes (3,), (3,), (3,), (4,), (3,), (3,).
-
-        Before its start the pose rests at its start, after its end at its end. With ``snap``,
-        times within 1e-9 s of a breakpoint are evaluated at the breakpoint (sampled use);
-        without, the exact branch at ``t``.
-        """
-        x, xd, xdd, omega, omegad = (np.empty(3) for _ in range(5))
-        quaternion = np.empty(4)
-        self.evaluate_into(t, x, xd, xdd, quaternion, omega, omegad, snap)
-        return x, xd, xdd, quaternion, omega, omegad
-
-    def evaluate_into(self, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray,
-                      quaternion: np.ndarray, omega: np.ndarray, omegad: np.ndarray,
-                      snap: bool = True) -> None:
-        """:meth:`evaluate` written into ``x``, ``xd``, ``xdd`` (shape (3,)), ``quaternion``
-        (shape (4,)), ``omega``, ``omegad`` (shape (3,)); no allocation."""
-        if snap:
-            t = snap_to(self._break_list, t)
-        if t < 0.0 or t >= self.duration:
-            x[:] = self.start if t < 0.0 else self.end
-            quaternion[:] = self.start_quaternion if t < 0.0 else self.end_quaternion
-            xd[:], xdd[:], omega[:], omegad[:] = 0.0, 0.0, 0.0, 0.0
-            return
-        s, sd, sdd = self.path(t)
-        d, w = self.displacement, self.world_rotation
-        np.multiply(d, s, out=x)
-        np.add(self.start, x, out=x)                 # start + s d
-        np.multiply(d, sd, out=xd)
-        np.multiply(d, sdd, out=xdd)
-        self._quaternion_into(s, quaternion)
-        np.multiply(w, sd, out=omega)
-        np.multiply(w, sdd, out=omegad)
 
 
 def read_table(path, columns) -> list[list[float]]:

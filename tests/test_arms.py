@@ -1,8 +1,9 @@
-"""The industrial arms (issue 22): ur5-pose and panda-pose through the master at 1 ms, checked
-against an independent model: Pinocchio's FK of the recorded joints, on a model the test builds
-from the same URDF file (the Panda's fingers locked by hand), and the reference against scipy's
-Slerp. The acceptance bars: tool position within 0.1 mm and orientation within 0.5 mrad over the
-run, 0.01 mm and 0.05 mrad at the end, every joint inside its limits (the Panda's at least 0.1 rad)."""
+"""The industrial arms (issue 22): ur5-pose, panda-pose and panda-waypoints through the master at
+1 ms, checked against an independent model: Pinocchio's FK of the recorded joints, on a model the
+test builds from the same URDF file (the Panda's fingers locked by hand), and the reference against
+scipy's Slerp. The acceptance bars: tool position within 0.1 mm and orientation within 0.5 mrad
+over the run, 0.01 mm and 0.05 mrad at the end, every joint inside its limits (the Panda's at
+least 0.1 rad)."""
 from __future__ import annotations
 
 import numpy as np
@@ -19,7 +20,10 @@ from robofmu.system.roles import Roles
 
 from robot_files import independent_model
 
-CASES = {"ur5-pose": "ur5", "panda-pose": "panda"}
+CASES = {"ur5-pose": "ur5", "panda-pose": "panda", "panda-waypoints": "panda"}
+#: The experiments on the robot's default profile (a pose_line); panda-waypoints runs its
+#: [trajectories.waypoints] profile (pose_waypoints from a CSV table).
+LINES = ("ur5-pose", "panda-pose")
 
 
 @pytest.fixture(scope="module", params=sorted(CASES))
@@ -58,7 +62,7 @@ def test_every_joint_stays_inside_its_limits_and_the_blocks_say_so(run):
     model, _ = independent_model(CASES[name])
     q = result.vector("plant.q")
     margin = np.minimum(q - model.lowerPositionLimit, model.upperPositionLimit - q)
-    assert margin.min() > (0.1 if name == "panda-pose" else 0.0), margin.min()
+    assert margin.min() > (0.1 if CASES[name] == "panda" else 0.0), margin.min()
     assert np.all(result["plant.within_limits"] == 1)
     assert np.all(result["ik.status"] == 0) and np.all(result["ik.reachable"] == 1)
     np.testing.assert_allclose(result["ik.joint_limit_margin"],
@@ -70,6 +74,8 @@ def test_every_joint_stays_inside_its_limits_and_the_blocks_say_so(run):
 
 def test_the_reference_is_a_line_and_a_slerp_on_one_lspb_time_law(run):
     name, _, result = run
+    if name not in LINES:
+        pytest.skip("a pose_waypoints profile: test_the_waypoints_reference_passes_through_the_tables_poses")
     robot = CASES[name]
     description = load_description(robot)
     model, frame = independent_model(robot)
@@ -87,6 +93,31 @@ def test_the_reference_is_a_line_and_a_slerp_on_one_lspb_time_law(run):
                                    start.translation + s * np.array(parameters["displacement"]), atol=1e-12)
         recorded = Rotation.from_quat(result.vector("trajectory.quat_ref")[k])
         assert (recorded.inv() * slerp(s)).magnitude() < 1e-12, t
+
+
+def test_the_waypoints_reference_passes_through_the_tables_poses(run):
+    """panda-waypoints: the table read here with numpy (not the package's reader); each leg a
+    straight line and scipy's Slerp between its rows on its own LSPB law, pauses at rest."""
+    name, _, result = run
+    if name in LINES:
+        pytest.skip("a pose_line profile: test_the_reference_is_a_line_and_a_slerp_on_one_lspb_time_law")
+    description = load_description(CASES[name])
+    parameters = description.profiles["waypoints"].parameters
+    rows = np.loadtxt(description.path.parent / parameters["waypoints"], delimiter=",", skiprows=4)
+    durations, pause = parameters["durations"], parameters["pause"]
+    assert rows.shape == (len(durations) + 1, 7)
+    x_ref, quat_ref = result.vector("trajectory.x_ref"), result.vector("trajectory.quat_ref")
+    start = 0.0
+    for i, T in enumerate(durations):
+        slerp = Slerp([0.0, 1.0], Rotation.from_quat(rows[i:i + 2, 3:]))
+        for k in np.linspace(round(start / 1e-3), round((start + T) / 1e-3), 9).round().astype(int):
+            u = result.time[k] - start
+            s = float(lspb([0.0], [1.0], T, u)[0][0])
+            np.testing.assert_allclose(x_ref[k], rows[i, :3] + s * (rows[i + 1, :3] - rows[i, :3]), atol=1e-12)
+            assert (Rotation.from_quat(quat_ref[k]).inv() * slerp(s)).magnitude() < 1e-12, (i, u)
+        start += T + pause
+    assert np.all(np.einsum("ij,ij->i", quat_ref[1:], quat_ref[:-1]) > 0.0)     # no sign flip between legs
+    np.testing.assert_allclose(result.vector("trajectory.xd_ref")[-1], 0.0, atol=0)
 
 
 def test_the_fk_block_outputs_the_frames_position_and_orientation(run):

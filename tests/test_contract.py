@@ -261,7 +261,7 @@ def test_vendor_annotation_names_robot_and_block(fmu_root, robot, block):
     description = load_description(robot)
     variant = description.trajectory.kind if block == "trajectory" else ""
     assert annotation.attrib == {"robot": robot, "kind": block, "variant": variant, "profile": "", "source": SOURCE_HASH,
-                                 "robot_data": robot_data_hash(description.path, description.urdf),
+                                 "robot_data": robot_data_hash(description.path, description.urdf, description.tables),
                                  "python": f"{sys.version_info.major}.{sys.version_info.minor}",
                                  "requirements": "resources/requirements.txt"}
     assert f"robofmu {block} block of robot '{robot}'" in root.get("description")

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from robofmu.components.ik import Unreachable, make_solver, solver_class
 from robofmu.components.robots import load_model
-from robofmu.components.trajectory import PoseLine
+from robofmu.components.pose_trajectory import PoseLine
 
 ROBOTS = ("ur5", "panda")
 #: The task frame and locked joints, stated here (not read from the descriptions).

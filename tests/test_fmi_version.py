@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def local(robot: str) -> str:
     """The local part of a FMU's version for a package robot: code hash, robot data hash."""
     description = load_description(robot)
-    return f"{SOURCE_HASH[:12]}.{robot_data_hash(description.path, description.urdf)[:8]}"
+    return f"{SOURCE_HASH[:12]}.{robot_data_hash(description.path, description.urdf, description.tables)[:8]}"
 
 
 def test_the_package_metadata_is_pyprojects_version():

@@ -210,7 +210,7 @@ def test_an_arms_pose_path_beyond_a_tightened_limit_is_refused_naming_joint_limi
     joint, the limit and the first sample beyond it."""
     from robofmu.components.ik import make_solver
     from robofmu.components.orientation import quaternion_of
-    from robofmu.components.trajectory import PoseLine
+    from robofmu.components.pose_trajectory import PoseLine
 
     model = load_model(robot)
     home = model.configuration("home")

@@ -1,12 +1,14 @@
-"""PoseLine: a task-space pose move (straight line + slerp on one LSPB time law), against scipy's
-Slerp, finite differences and its end poses."""
+"""The pose profiles: PoseLine (straight line + slerp on one LSPB or minimum-time trapezoid time
+law) and PoseWaypoints (one such move per leg), against scipy's Slerp, closed forms, finite
+differences and their end poses."""
 import math
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from robofmu.components.trajectory import PoseLine, lspb
+from robofmu.components.pose_trajectory import PoseLine, PoseWaypoints
+from robofmu.components.trajectory import lspb
 
 #: The ur5-like case: tool z pointing down, turned a quarter about its own z on the way.
 UR5_QUATERNION = Rotation.from_matrix([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).as_quat()
@@ -176,3 +178,186 @@ def test_half_turn_is_accepted():
     line = PoseLine(**{**UR5, "rotation": [math.pi, 0.0, 0.0]})
     end = Rotation.from_quat(UR5_QUATERNION) * Rotation.from_rotvec([math.pi, 0.0, 0.0])
     assert angle_between(line.evaluate(2.0)[3], end.as_quat()) < 1e-12
+
+
+# --- the minimum-time trapezoid time law ---------------------------------------------------
+
+LIMITED = dict(start=[0.4, -0.1, 0.3], displacement=[-0.15, 0.20, -0.10], start_quaternion=UR5_QUATERNION,
+               rotation=[0.0, 0.0, math.pi / 2])
+#: (v_max, a_max, omega_max, alpha_max): which limit binds the rate and the acceleration of s.
+LIMIT_CASES = {"linear binds": (0.1, 0.4, 5.0, 20.0), "angular binds": (5.0, 20.0, 0.5, 1.0),
+               "triangle": (1.0, 0.2, 9.0, 9.0), "mixed": (0.1, 5.0, 5.0, 1.0)}
+
+
+def minimum_time(distance, angle, v_max, a_max, omega_max, alpha_max):
+    """The closed form: s from 0 to 1 at rate <= min(v/|d|, w/|r|), |s''| <= min(a/|d|, alpha/|r|)."""
+    rate = min(v_max / distance, omega_max / angle)
+    acceleration = min(a_max / distance, alpha_max / angle)
+    if rate * rate / acceleration <= 1.0:
+        return 1.0 / rate + rate / acceleration, rate / acceleration
+    return 2.0 * math.sqrt(1.0 / acceleration), math.sqrt(1.0 / acceleration)
+
+
+@pytest.mark.parametrize("limits", LIMIT_CASES.values(), ids=LIMIT_CASES)
+def test_minimum_time_move_keeps_every_limit_and_reaches_the_binding_ones(limits):
+    v_max, a_max, omega_max, alpha_max = limits
+    line = PoseLine(**LIMITED, v_max=v_max, a_max=a_max, omega_max=omega_max, alpha_max=alpha_max)
+    distance, angle = np.linalg.norm(LIMITED["displacement"]), math.pi / 2
+    T, ramp = minimum_time(distance, angle, *limits)
+    assert line.duration == pytest.approx(T, rel=1e-14)
+    np.testing.assert_allclose(line.breakpoints, np.unique([0.0, ramp, T - ramp, T]), rtol=1e-14, atol=1e-15)
+    samples = [line.evaluate(t) for t in np.linspace(0.0, T, 4001)]
+    speed = max(np.linalg.norm(v[1]) for v in samples)
+    acceleration = max(np.linalg.norm(v[2]) for v in samples)
+    turn = max(np.linalg.norm(v[4]) for v in samples)
+    turn_acceleration = max(np.linalg.norm(v[5]) for v in samples)
+    tight = 1.0 + 1e-12
+    assert speed <= v_max * tight and turn <= omega_max * tight
+    assert acceleration <= a_max * tight and turn_acceleration <= alpha_max * tight
+    # minimum time: one limit of each order is reached (the rate's only if the move cruises)
+    assert max(acceleration / a_max, turn_acceleration / alpha_max) == pytest.approx(1.0, rel=1e-12)
+    if 2 * ramp < T:
+        assert max(speed / v_max, turn / omega_max) == pytest.approx(1.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("limits", LIMIT_CASES.values(), ids=LIMIT_CASES)
+def test_minimum_time_move_is_a_slerp_and_its_rates_match_finite_differences(limits):
+    v_max, a_max, omega_max, alpha_max = limits
+    line = PoseLine(**LIMITED, v_max=v_max, a_max=a_max, omega_max=omega_max, alpha_max=alpha_max)
+    r0 = Rotation.from_quat(LIMITED["start_quaternion"])
+    slerp = Slerp([0.0, 1.0], Rotation.concatenate([r0, r0 * Rotation.from_rotvec(LIMITED["rotation"])]))
+    d = np.asarray(LIMITED["displacement"])
+    h = 1e-5
+    for t in np.linspace(0.0, line.duration, 61)[1:-1]:
+        if np.min(np.abs(line.breakpoints - t)) < 2 * h:
+            continue
+        x, xd, xdd, q, omega, omegad = line.evaluate(t, snap=False)
+        s = float(np.dot(x - LIMITED["start"], d) / np.dot(d, d))     # the position says where on the line
+        np.testing.assert_allclose(x, np.asarray(LIMITED["start"]) + s * d, rtol=0, atol=1e-15)
+        assert angle_between(q, slerp([s]).as_quat()[0]) < 1e-12
+        x_p, xd_p, _, q_p, w_p, _ = line.evaluate(t + h, snap=False)
+        x_m, xd_m, _, q_m, w_m, _ = line.evaluate(t - h, snap=False)
+        np.testing.assert_allclose((x_p - x_m) / (2 * h), xd, rtol=0, atol=1e-8)
+        np.testing.assert_allclose((xd_p - xd_m) / (2 * h), xdd, rtol=0, atol=1e-8)
+        world = (Rotation.from_quat(q_p) * Rotation.from_quat(q_m).inv()).as_rotvec() / (2 * h)
+        np.testing.assert_allclose(world, omega, rtol=0, atol=1e-8)
+        np.testing.assert_allclose((w_p - w_m) / (2 * h), omegad, rtol=0, atol=1e-8)
+
+
+def test_a_pure_rotation_or_pure_translation_at_minimum_time():
+    turn = PoseLine(**{**LIMITED, "displacement": [0.0, 0.0, 0.0]}, v_max=1e-3, a_max=1e-3, omega_max=1.0,
+                    alpha_max=2.0)
+    assert turn.duration == pytest.approx(minimum_time(1.0, math.pi / 2, 1e9, 1e9, 1.0, 2.0)[0], rel=1e-14)
+    slide = PoseLine(**{**LIMITED, "rotation": [0.0, 0.0, 0.0]}, v_max=0.1, a_max=0.5, omega_max=1e-3,
+                     alpha_max=1e-3)
+    distance = float(np.linalg.norm(LIMITED["displacement"]))
+    assert slide.duration == pytest.approx(minimum_time(distance, 1.0, 0.1, 0.5, 1e9, 1e9)[0], rel=1e-14)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(duration=2.0, v_max=0.1), r"give either duration .* or the limits v_max, a_max, omega_max, alpha_max.*"
+                                    r"got duration and v_max"),
+    (dict(v_max=0.1, a_max=0.4), r"missing: omega_max, alpha_max"),
+    (dict(v_max=0.1, a_max=0.4, omega_max=-1.0, alpha_max=1.0), r"omega_max: must be > 0 rad/s, got -1"),
+    (dict(v_max=0.1, a_max=0.4, omega_max=1.0, alpha_max=1.0, displacement=[0, 0, 0], rotation=[0, 0, 0]),
+     r"displacement and rotation are both zero"),
+])
+def test_minimum_time_refusals_name_the_parameters(change, message):
+    with pytest.raises(ValueError, match=message):
+        PoseLine(**{**LIMITED, **change})
+
+
+# --- pose waypoints ------------------------------------------------------------------------
+
+def pose_rows(seed=5, count=4):
+    """``count`` poses: random origins and orientations, every other quaternion given with the
+    opposite sign (the same rotation)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for k in range(count):
+        quaternion = Rotation.random(random_state=rng).as_quat() * (-1.0 if k % 2 else 1.0)
+        rows.append([*rng.uniform(-0.5, 0.5, 3), *quaternion])
+    return np.array(rows)
+
+
+ROWS = pose_rows()
+DURATIONS = [1.0, 1.5, 0.8]
+
+
+@pytest.mark.parametrize("pause", [0.0, 0.4])
+def test_each_leg_is_a_line_and_scipys_slerp_on_its_lspb_law_with_rests_between(pause):
+    profile = PoseWaypoints(ROWS, DURATIONS, pause=pause, cruise_factor=1.6)
+    starts = np.concatenate([[0.0], np.cumsum(np.array(DURATIONS) + pause)[:-1]])
+    assert profile.duration == pytest.approx(sum(DURATIONS) + 2 * pause, abs=1e-15)
+    for i, (t0, T) in enumerate(zip(starts, DURATIONS)):
+        rotations = Rotation.from_quat(ROWS[i:i + 2, 3:])                # scipy's slerp: the shortest rotation
+        slerp = Slerp([0.0, 1.0], rotations)
+        for u in np.linspace(0.0, T, 41)[:-1]:
+            s = float(lspb(np.zeros(1), np.ones(1), T, u, 1.6)[0][0])
+            x, _, _, q, _, _ = profile.evaluate(t0 + u, snap=False)
+            np.testing.assert_allclose(x, ROWS[i, :3] + s * (ROWS[i + 1, :3] - ROWS[i, :3]), rtol=0, atol=1e-14)
+            assert angle_between(q, slerp([s]).as_quat()[0]) < 1e-12, (i, u)
+        if pause and i < len(DURATIONS) - 1:                             # at rest at the next pose during the pause
+            for u in np.linspace(T, T + pause, 7)[:-1]:
+                x, xd, xdd, q, omega, omegad = profile.evaluate(t0 + u)
+                np.testing.assert_allclose(x, ROWS[i + 1, :3], rtol=0, atol=1e-15)
+                assert angle_between(q, ROWS[i + 1, 3:]) < 1e-12
+                assert not np.any(np.concatenate([xd, xdd, omega, omegad]))
+
+
+def test_waypoint_rates_match_finite_differences_and_the_quaternion_never_flips():
+    profile = PoseWaypoints(ROWS, DURATIONS, pause=0.3)
+    h = 1e-5
+    times = np.linspace(-0.2, profile.duration + 0.2, 1501)
+    quaternions = np.array([profile.evaluate(t)[3] for t in times])
+    assert np.all(np.einsum("ij,ij->i", quaternions[1:], quaternions[:-1]) > 0.0)   # rows' signs alternate
+    np.testing.assert_allclose(np.linalg.norm(quaternions, axis=1), 1.0, rtol=0, atol=1e-15)
+    checked = 0
+    for t in times[::5]:
+        if np.min(np.abs(profile.breakpoints - t)) < 2 * h:
+            continue
+        _, xd, xdd, _, omega, omegad = profile.evaluate(t, snap=False)
+        x_p, xd_p, _, q_p, w_p, _ = profile.evaluate(t + h, snap=False)
+        x_m, xd_m, _, q_m, w_m, _ = profile.evaluate(t - h, snap=False)
+        np.testing.assert_allclose((x_p - x_m) / (2 * h), xd, rtol=0, atol=1e-8)
+        np.testing.assert_allclose((xd_p - xd_m) / (2 * h), xdd, rtol=0, atol=1e-8)
+        world = (Rotation.from_quat(q_p) * Rotation.from_quat(q_m).inv()).as_rotvec() / (2 * h)
+        np.testing.assert_allclose(world, omega, rtol=0, atol=1e-8)
+        np.testing.assert_allclose((w_p - w_m) / (2 * h), omegad, rtol=0, atol=1e-8)
+        checked += 1
+    assert checked > 250
+
+
+def test_waypoints_rest_at_their_first_and_last_pose_and_fill_given_arrays():
+    profile = PoseWaypoints(ROWS, DURATIONS, pause=0.3)
+    for t, row in ((-1.0, ROWS[0]), (0.0, ROWS[0]), (profile.duration, ROWS[-1]), (99.0, ROWS[-1])):
+        x, xd, _, q, omega, _ = profile.evaluate(t)
+        np.testing.assert_allclose(x, row[:3], rtol=0, atol=1e-15)
+        assert angle_between(q, row[3:]) < 1e-12
+        if t != 0.0:
+            assert not np.any(xd) and not np.any(omega)
+    out = [np.full(3, np.nan), np.full(3, np.nan), np.full(3, np.nan), np.full(4, np.nan),
+           np.full(3, np.nan), np.full(3, np.nan)]
+    for t in (-1.0, 0.5, 1.1, 1.3, 2.9, 99.0):
+        profile.evaluate_into(t, *out)
+        for got, expected in zip(out, profile.evaluate(t)):
+            assert np.array_equal(got, expected)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(waypoints=ROWS[:, :6]), r"waypoints: need at least two poses of 7 values \(x, y, z, qx, qy, qz, qw\)"),
+    (dict(waypoints=ROWS[:1]), r"waypoints: need at least two poses"),
+    (dict(waypoints=np.vstack([ROWS[:2], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]])),
+     r"waypoints: row 3: the orientation quaternion .* has norm 2, not 1"),
+    (dict(durations=[1.0, 1.0]), r"durations: need one duration per move \(3\), got 2"),
+    (dict(durations=[1.0, 0.0, 1.0]), r"durations: every move must take a positive"),
+    (dict(pause=-1.0), r"pause: must be >= 0 s"),
+    (dict(cruise_factor=1.0), r"cruise_factor: must lie in \(1, 2\]"),
+    (dict(waypoints=np.vstack([ROWS[:2], [1e308, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], [-1e308, 0, 0, 0, 0, 0, 1]])),
+     r"waypoints rows 2 to 3, durations\[2\] = 1\.5 s \(move 2\): displacement and duration = 1\.5 s: the peak "
+     r"speed would be inf m/s"),
+])
+def test_waypoint_refusals_name_the_argument(change, message):
+    given = {"waypoints": ROWS, "durations": DURATIONS, **change}
+    with pytest.raises(ValueError, match=message):
+        PoseWaypoints(**given)

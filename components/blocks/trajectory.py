@@ -7,7 +7,10 @@ waypoints a list of rows, or a CSV table beside the robot's TOML (``waypoints = 
 ``circle``: task space, once round a circle in the first two task coordinates with an LSPB
 phase (further task coordinates offset + amplitude sin phi);
 ``pose_line``: a pose task, the frame's origin on a straight line and its orientation by slerp
-(shortest rotation), on one LSPB time law.
+(shortest rotation), on one time law: LSPB of a duration, or minimum time under speed and
+acceleration limits;
+``pose_waypoints``: a pose task through poses (a list of rows or a CSV table, columns x, y, z,
+qx, qy, qz, qw), one pose line per leg on LSPB, with pauses.
 Outputs at time t belong to t; no inputs.
 """
 from __future__ import annotations
@@ -18,7 +21,8 @@ from dataclasses import replace
 
 from ..orientation import COMPONENTS, quaternion_of
 from ..parameters import Parameter
-from ..trajectory import Circle, PoseLine, StraightLine, SynchronizedBangBang, WaypointTrajectory, read_table
+from ..pose_trajectory import POSE_COLUMNS, PoseLine, PoseWaypoints
+from ..trajectory import Circle, StraightLine, SynchronizedBangBang, WaypointTrajectory, read_table
 from .base import Block
 from .text import format_matrix, format_vector, parse_matrix, parse_vector
 
@@ -72,6 +76,21 @@ class _Reference(Block):
     def output(self, t):
         self.profile.evaluate_into(t, *self._views, self.snap)
 
+    def read_waypoints(self, columns) -> None:
+        """Given ``waypoints = "file.csv"`` (a table beside the robot's TOML, one column per name of
+        ``columns``), its rows in the description's place."""
+        table = self.description.trajectory.parameters.get("waypoints")
+        if isinstance(table, str):
+            try:
+                rows = read_table(self.description.path.parent / table, columns)
+            except ValueError as exc:
+                self.table_error("trajectory", "waypoints", str(exc))
+            self.description = replace(self.description, trajectory=replace(
+                self.description.trajectory, parameters={**self.description.trajectory.parameters, "waypoints": rows}))
+
+    def string_parameter(self, name, description, start):
+        self.setting(Parameter(name, "String", "", description, start), start)
+
     def parameter_names(self) -> list[str]:
         """The block's parameters, each vector once by its base (``start``, ``length``)."""
         names = []
@@ -114,14 +133,7 @@ class WaypointsBlock(_Reference):
     )
 
     def declare(self):
-        table = self.description.trajectory.parameters.get("waypoints")
-        if isinstance(table, str):                  # a CSV table beside the robot's TOML
-            try:
-                rows = read_table(self.description.path.parent / table, self.description.task.coordinates)
-            except ValueError as exc:
-                self.table_error("trajectory", "waypoints", str(exc))
-            self.description = replace(self.description, trajectory=replace(
-                self.description.trajectory, parameters={**self.description.trajectory.parameters, "waypoints": rows}))
+        self.read_waypoints(self.description.task.coordinates)
         vectors, rest = self.given({"waypoints": 0, "durations": 0})
         given = {**vectors, **rest}
         values = self.table_values("trajectory", self.settings_declared, rest)
@@ -139,9 +151,6 @@ class WaypointsBlock(_Reference):
                              lambda i, w: f"Reference task {w} along {coords[i - 1]}")
         if self.has_grip:
             self.grip = self.boolean("grip", "output", "Gripper closed (carrying the payload)", depends=[])
-
-    def string_parameter(self, name, description, start):
-        self.setting(Parameter(name, "String", "", description, start), start)
 
     def configure(self):
         m = self.robot.m
@@ -274,26 +283,61 @@ class CircleBlock(_Reference):
         super().configure()
 
 
-class PoseLineBlock(_Reference):
-    variant = "pose_line"
-    summary = ("pose reference: the task frame's origin on a straight line by displacement, its orientation "
-               "turning by rotation (about its own start axes, shortest rotation: slerp), both on one LSPB time "
-               "law of duration, then at rest; orientation as a unit quaternion (x, y, z, w), angular rates in "
-               "the world frame; outputs at time t belong to t")
+class _PoseReference(_Reference):
+    """Common part of the pose profiles: a pose task, and its six outputs (position, velocity,
+    acceleration, quaternion, angular velocity, angular acceleration)."""
+
+    abstract = True
     quantities = ("position", "velocity", "acceleration", "orientation", "angular velocity",
                   "angular acceleration")
-    scalars = (
+
+    def require_pose_task(self) -> str:
+        """The task's frame; a table error unless the task is a full pose."""
+        task = self.description.task
+        if not task.is_pose or list(task.axes) != [0, 1, 2]:
+            self.table_error("trajectory", "profile", f"{self.variant} needs a pose task: [task] with the three "
+                             "world axes of the position and orientation_axes")
+        return task.frame
+
+    def declare_pose_outputs(self, frame: str) -> None:
+        axis = lambda i: "xyz"[i - 1]
+        out = []
+        for base, unit, what in (("x_ref", "m", "position"), ("xd_ref", "m/s", "velocity"),
+                                 ("xdd_ref", "m/s2", "acceleration")):
+            out.append(self.reals(base, 3, "output", unit, lambda i, w=what: f"Reference {w} of frame {frame}, "
+                                  f"world {axis(i)}", depends=[]))
+        out.append(self.reals("quat_ref", 4, "output", "1",
+                              lambda i: f"Reference orientation of frame {frame}: unit quaternion component "
+                                        f"{COMPONENTS[i - 1]} (x, y, z, w; frame to world)", depends=[]))
+        for base, unit, what in (("omega_ref", "rad/s", "angular velocity"),
+                                 ("omegad_ref", "rad/s2", "angular acceleration")):
+            out.append(self.reals(base, 3, "output", unit, lambda i, w=what: f"Reference {w} of frame {frame} "
+                                  f"about world {axis(i)}", depends=[]))
+        self.outputs = out
+
+
+class PoseLineBlock(_PoseReference):
+    variant = "pose_line"
+    summary = ("pose reference: the task frame's origin on a straight line by displacement, its orientation "
+               "turning by rotation (about its own start axes, shortest rotation: slerp), both on one time law "
+               "(LSPB of duration, or minimum time under v_max, a_max, omega_max, alpha_max), then at rest; "
+               "orientation as a unit quaternion (x, y, z, w), angular rates in the world frame; outputs at "
+               "time t belong to t")
+    lspb = (
         Parameter("duration", "Real", "s", "Duration of the move", None, above=0.0),
         Parameter("cruise_factor", "Real", "1", "Cruise speed over the move's mean speed, in (1, 2]", 1.5,
                   above=1.0, high=2.0),
     )
+    limits = (
+        Parameter("v_max", "Real", "m/s", "Speed limit of the origin along the line", None, above=0.0),
+        Parameter("a_max", "Real", "m/s2", "Acceleration limit of the origin along the line", None, above=0.0),
+        Parameter("omega_max", "Real", "rad/s", "Angular speed limit", None, above=0.0),
+        Parameter("alpha_max", "Real", "rad/s2", "Angular acceleration limit", None, above=0.0),
+    )
 
     def declare(self):
-        robot, task = self.robot, self.description.task
-        if not task.is_pose or list(task.axes) != [0, 1, 2]:
-            self.table_error("trajectory", "profile", "pose_line needs a pose task: [task] with the three "
-                             "world axes of the position and orientation_axes")
-        frame = task.frame
+        robot = self.robot
+        frame = self.require_pose_task()
         given = dict(self.description.trajectory.parameters)
         named = given.pop("start_configuration", "home")
         if named not in self.description.configurations:
@@ -308,6 +352,11 @@ class PoseLineBlock(_Reference):
             if not isinstance(value, list) or len(value) != length:
                 self.table_error("trajectory", key, f"needs {length} values, got {value!r}")
             given[f"_{key}"] = value
+        self.at_limits = any(p.name in given for p in self.limits)
+        if self.at_limits and "duration" in given:
+            self.table_error("trajectory", "duration", "give either duration (an LSPB time law) or the limits "
+                             f"{', '.join(p.name for p in self.limits)} (minimum time), not both")
+        self.scalars = self.limits if self.at_limits else self.lspb
         values = self.table_values("trajectory", self.scalars,
                                    {k: v for k, v in given.items() if not k.startswith("_")})
         axis = lambda i: "xyz"[i - 1]
@@ -324,22 +373,44 @@ class PoseLineBlock(_Reference):
                              f"axis {axis(i)}", given["_rotation"])
         for p in self.scalars:
             self.declare_parameter(p, values[p.name])
-        out = []
-        for base, unit, what in (("x_ref", "m", "position"), ("xd_ref", "m/s", "velocity"),
-                                 ("xdd_ref", "m/s2", "acceleration")):
-            out.append(self.reals(base, 3, "output", unit, lambda i, w=what: f"Reference {w} of frame {frame}, "
-                                  f"world {axis(i)}", depends=[]))
-        out.append(self.reals("quat_ref", 4, "output", "1",
-                              lambda i: f"Reference orientation of frame {frame}: unit quaternion component "
-                                        f"{COMPONENTS[i - 1]} (x, y, z, w; frame to world)", depends=[]))
-        for base, unit, what in (("omega_ref", "rad/s", "angular velocity"),
-                                 ("omegad_ref", "rad/s2", "angular acceleration")):
-            out.append(self.reals(base, 3, "output", unit, lambda i, w=what: f"Reference {w} of frame {frame} "
-                                  f"about world {axis(i)}", depends=[]))
-        self.outputs = out
+        self.declare_pose_outputs(frame)
 
     def configure(self):
+        time_law = {p.name: self.parameter(p.name) for p in self.scalars}
         self.profile = PoseLine(self.finite_vector("start"), self.finite_vector("displacement"),
-                                self.finite_vector("start_quaternion"), self.finite_vector("rotation"),
-                                self.parameter("duration"), self.parameter("cruise_factor"))
+                                self.finite_vector("start_quaternion"), self.finite_vector("rotation"), **time_law)
+        super().configure()
+
+
+class PoseWaypointsBlock(_PoseReference):
+    variant = "pose_waypoints"
+    summary = ("pose reference through waypoints (x, y, z, qx, qy, qz, qw per row): one LSPB move per leg, the "
+               "origin on a straight line and the orientation by slerp (shortest rotation), with pauses between "
+               "moves; orientation as a unit quaternion (x, y, z, w), angular rates in the world frame; outputs at "
+               "time t belong to t")
+    settings_declared = (
+        Parameter("pause", "Real", "s", "Rest between two moves", 0.0, low=0.0),
+        Parameter("cruise_factor", "Real", "1", "Cruise speed over the move's mean speed, in (1, 2]", 1.5,
+                  above=1.0, high=2.0),
+    )
+
+    def declare(self):
+        frame = self.require_pose_task()
+        self.read_waypoints(POSE_COLUMNS)
+        vectors, rest = self.given({"waypoints": 0, "durations": 0})
+        values = self.table_values("trajectory", self.settings_declared, rest)
+        self.string_parameter("waypoints", f"Poses of frame {frame}, one row per pose ('{' '.join(POSE_COLUMNS)}': "
+                              "origin in m, world; unit quaternion x, y, z, w, frame to world), rows separated "
+                              "by ';'", format_matrix(vectors["waypoints"]))
+        self.string_parameter("durations", "Duration of each move (s), space-separated; one per leg",
+                              format_vector(vectors["durations"]))
+        for p in self.settings_declared:
+            self.declare_parameter(p, values[p.name])
+        self.declare_pose_outputs(frame)
+
+    def configure(self):
+        self.profile = PoseWaypoints(
+            parse_matrix(str(self.settings["waypoints"]), "parameter waypoints", columns=len(POSE_COLUMNS)),
+            parse_vector(str(self.settings["durations"]), "parameter durations"),
+            pause=self.parameter("pause"), cruise_factor=self.parameter("cruise_factor"))
         super().configure()

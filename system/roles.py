@@ -84,6 +84,11 @@ class Roles:
         model = model or self.model()
         return np.array([model.fk(v) for v in self.vector(result, "q")])
 
+    def measures_orientation(self, model: RobotModel) -> bool:
+        """Whether :meth:`task_errors` gives an orientation error on this robot: a task reference
+        and either task coordinates in rad or a pose task with a ``quat_ref`` role."""
+        return self.x_ref is not None and bool(task_axes(model)[1] or (model.orientation_axes and self.quat_ref))
+
     def task_errors(self, result: Result, model: RobotModel | None = None, poses: np.ndarray | None = None):
         """(position, orientation) errors at every recorded point, FK(q) against x_ref: the
         task point's distance (m, :meth:`tcp_error`) and the orientation error (rad): for a pose

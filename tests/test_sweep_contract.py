@@ -44,3 +44,19 @@ def test_a_sweep_run_of_every_robot(robot, fmu_root):
     by_hand = metrics_of(analysis.tracking_metrics(result, Roles.of(configured)), result, roles)
     assert {m: record[m] for m in metrics if m != "settling_time"} == \
         {m: by_hand[m] for m in metrics if m != "settling_time"}
+
+
+@pytest.mark.slow
+def test_a_sweep_run_of_a_pose_task_records_its_orientation_error(fmu_root):
+    """ur5-pose: the tool's orientation error (from quat_ref) is a metric column, equal to the
+    single run's analysis."""
+    design = Design("ur5-pose", [parse_axis("controller.gain_scale=0.5,2")], stop_time=0.3)
+    system, roles, metrics, _, runs = check(design, fmu_root)
+    assert metrics[:2] == ["max_tcp_error", "max_orientation_error"]
+    record = run_one(system, runs[0], design.stop_time, None)
+    assert record["status"] == "ok", record["message"]
+    configured = experiment.with_parameters(system, {"controller.gain_scale": 0.5})
+    result = Master(configured).run(stop_time=0.3)
+    tracking = analysis.tracking_metrics(result, Roles.of(configured))
+    assert record["max_orientation_error"] == float(tracking.orientation_error.max())
+    assert 0.0 < record["max_orientation_error"] < 5e-4

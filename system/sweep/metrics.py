@@ -8,8 +8,10 @@ Columns (joint j = 1 .. n; joint units rad or m, effort units N·m or N):
 
 - ``max_tcp_error`` (m): max |FK(q) - x_ref| over the run, over the task coordinates measured in
   m (a pose's angle is not added to a distance), where the experiment has a task reference;
-- ``max_orientation_error`` (rad): max |FK(q)_i - x_ref_i| over the task coordinates measured in
-  rad, where the experiment has a task reference and the robot's task such coordinates (3rrp);
+- ``max_orientation_error`` (rad): where the experiment has a task reference and an orientation
+  (:meth:`~robofmu.system.roles.Roles.measures_orientation`): for a pose task the largest rotation
+  angle from quat_ref to the frame, else max |FK(q)_i - x_ref_i| over the task coordinates
+  measured in rad (3rrp);
 - ``max_joint_error``: the largest ``max_joint_error[j]``;
 - ``peak_effort``: the largest ``peak_effort[j]``, where the experiment has efforts;
 - ``settling_time`` (s): see :func:`~robofmu.system.analysis.settling_time` (empty where it
@@ -23,7 +25,7 @@ from robofmu.components.robots import RobotModel
 
 from robofmu.system.analysis import Tracking, settling_time
 from robofmu.system.result import Result
-from robofmu.system.roles import Roles, task_axes
+from robofmu.system.roles import Roles
 
 __all__ = ["METRIC_UNITS", "metric_names", "metrics_of"]
 
@@ -34,7 +36,7 @@ METRIC_UNITS = {"max_tcp_error": "m", "max_orientation_error": "rad", "settling_
 def metric_names(roles: Roles, model: RobotModel) -> list[str]:
     """The metric columns of an experiment with these roles on this robot, in order."""
     names = ["max_tcp_error"] if roles.x_ref else []
-    names += ["max_orientation_error"] if roles.x_ref and task_axes(model)[1] else []
+    names += ["max_orientation_error"] if roles.measures_orientation(model) else []
     names += ["max_joint_error"] + (["peak_effort"] if roles.tau else []) + ["settling_time"]
     for j in range(1, model.n + 1):
         names += [f"max_joint_error[{j}]", f"rms_joint_error[{j}]", f"final_joint_error[{j}]"]

@@ -218,7 +218,7 @@ def check_fmu_folder(system: System, option: str = "--fmus") -> None:
     this process runs, or carrying other data of the experiment's robot than its description
     now holds (a FMU built before a robofmu version change, its code the same, runs as built).
     Each message says how to build them."""
-    from robofmu.components.robots import load_description
+    from robofmu.components.robots import is_robot_file, load_description
 
     folder = system.fmu_dir
     robot = system.extra.get("robot")
@@ -227,7 +227,9 @@ def check_fmu_folder(system: System, option: str = "--fmus") -> None:
     if relative and not folder.is_dir():
         if folder.exists():
             raise UsageError(f"{option} {folder}: is a file, not the folder of the FMUs")
-        raise UsageError(f"{option} {folder}: no such folder; build the FMUs: robofmu build --out {folder}")
+        # every package robot's FMUs, or those of a robot TOML of one's own (not among them)
+        everything = build if isinstance(robot, str) and is_robot_file(robot) else f"robofmu build --out {folder}"
+        raise UsageError(f"{option} {folder}: no such folder; build the FMUs: {everything}")
     missing = [spec for spec in system.blocks if not system.fmu_path(spec).is_file()]
     if missing:
         names = ", ".join(str(spec.fmu) for spec in missing)

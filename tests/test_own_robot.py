@@ -409,3 +409,166 @@ def test_a_urdf_of_an_installed_distribution_travels_in_the_fmu(tmp_path):
     assert "'example-robot-data' is not installed" in child["refused"]
     rows = simulate_fmu(str(fmu), stop_time=0.002, step_size=1e-3)
     assert child["names"] == list(rows.dtype.names) and child["last"] == [float(v) for v in rows[-1]]
+
+
+# -- robofmu step on a robot of one's own ----------------------------------------------------------------
+def myarm(data: dict) -> None:
+    """A copy_robot edit: planar2r renamed myarm (the TOML then is myarm.toml), its pd gain KP."""
+    data["name"] = "myarm"
+    data["gains"]["pd"]["kp"] = KP
+
+
+def test_the_step_api_takes_a_robot_by_name_path_or_description(copy_robot, tmp_path):
+    """step_setup, step_system and default_amplitudes take a robot TOML's path (str or Path) or its
+    description as they take a package robot's name: the FMUs are ``<fmu_dir>/myarm/``, and the
+    system names the robot again by its TOML's absolute path (a package robot by its name), so a
+    missing FMU's message says how to build it."""
+    from robofmu.system import stepresponse as sr
+    from robofmu.system.usage import UsageError, check_fmu_folder
+
+    toml = copy_robot("planar2r", myarm, stem="myarm")
+    assert toml == tmp_path / "planar2r" / "myarm.toml"
+    by_name = sr.step_setup("planar2r", joint=2)
+    np.testing.assert_array_equal(by_name.q_ref, [0.0, 1.02])           # home (0, 1 rad) + 0.02 rad on q2
+    for given in (toml, str(toml), load_description(toml)):
+        setup = sr.step_setup(given, joint=2)
+        assert setup.robot == "myarm" and setup.joints == [2] and setup.joint_units == ["rad", "rad"]
+        np.testing.assert_array_equal(setup.q_ref, by_name.q_ref)
+        np.testing.assert_array_equal(sr.default_amplitudes(given), [0.02, 0.02])
+        system = sr.step_system(tmp_path / "fmus", KP, 40.0, robot=given, joint=2)
+        assert system.name == "myarm-step" and system.extra["robot"] == str(toml.resolve())
+        assert [(b.name, str(b.fmu)) for b in system.blocks] == [("controller", "myarm/controller.fmu"),
+                                                                 ("plant", "myarm/plant.fmu")]
+        assert system.block("controller").parameters["q_ref"] == [0.0, 1.02]
+    assert sr.step_system("fmus", 400.0, 40.0, robot="planar2r").extra["robot"] == "planar2r"
+    assert sr.step_system("fmus", 400.0, 40.0, robot=ROBOTS_DIR / "planar2r" / "planar2r.toml").extra["robot"] == \
+        "planar2r"                                                           # the package's own file: its name
+    (tmp_path / "fmus").mkdir()
+    with pytest.raises(UsageError) as refused:
+        check_fmu_folder(sr.step_system(tmp_path / "fmus", KP, 40.0, robot=toml))
+    assert str(refused.value) == (f"--fmus {tmp_path / 'fmus'}: no myarm/controller.fmu, myarm/plant.fmu (for "
+                                  f"myarm-step); build them: robofmu build {toml.resolve()} --out {tmp_path / 'fmus'}")
+
+    def open_loop(data):
+        myarm(data)
+        data["blocks"] = ["trajectory", "ik", "fk"]
+
+    copy_robot("planar2r", open_loop, stem="myarm")
+    with pytest.raises(ValueError) as refused:
+        sr.step_setup(toml)
+    assert str(refused.value) == "robot: 'myarm' has no controller and no plant block (its blocks: trajectory, ik, fk)"
+
+
+def step_cli(argv, capsys) -> tuple[int, str, str]:
+    """(exit status, stdout, stderr) of ``robofmu step ARGV``, in this process (cli.main)."""
+    from robofmu.system import cli as command
+
+    status = command.main(["step", *map(str, argv)])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_step_refuses_a_robot_toml_in_one_line_naming_robot(copy_robot, tmp_path, capsys):
+    """``robofmu step --robot PATH``: a path that does not exist, a folder, a TOML with a syntax
+    error, a TOML that is not a valid description (its DescriptionError, naming file and key) and a
+    robot without controller and plant blocks are each one line naming --robot, status 2, nothing
+    run or written."""
+    from robot_files import refusal
+
+    fmus, out = tmp_path / "fmus", tmp_path / "out"
+    fmus.mkdir()
+
+    def refused(robot) -> str:
+        status, stdout, err = step_cli(["--robot", robot, "--fmus", fmus, "--out", out], capsys)
+        assert status == 2 and stdout == "" and "Traceback" not in err, (status, stdout, err)
+        lines = err.splitlines()
+        assert len(lines) == 1 and lines[0].startswith("robofmu step: --robot: "), err
+        return lines[0]
+
+    missing = tmp_path / "nothere" / "arm.toml"
+    assert refused(missing) == f"robofmu step: --robot: no such robot file {missing}"
+    toml = copy_robot("planar2r", myarm, stem="myarm")
+    assert refused(toml.parent) == f"robofmu step: --robot: {toml.parent}: is a folder; give its robot TOML"
+    broken = tmp_path / "broken" / "broken.toml"
+    broken.parent.mkdir()
+    broken.write_text('name = "broken"\nsummary = \nblocks = ["controller", "plant"]\n')
+    syntax = refusal(broken.resolve(), "(syntax)")
+    assert refused(broken) == f"robofmu step: --robot: {syntax}"
+    assert syntax == f"{broken.resolve()}: (syntax): Invalid value (at line 2, column 11)"
+
+    def negative_kp(data):
+        myarm(data)
+        data["gains"]["pd"]["kp"] = -1.0
+
+    copy_robot("planar2r", negative_kp, stem="myarm")
+    invalid = refusal(toml.resolve(), "gains.pd.kp")
+    assert refused(toml) == f"robofmu step: --robot: {invalid}"
+    assert invalid == f"{toml.resolve()}: gains.pd.kp: parameter kp = -1 1/s2 is invalid: must be > 0"
+
+    def open_loop(data):
+        myarm(data)
+        data["blocks"] = ["trajectory", "ik", "fk"]
+
+    copy_robot("planar2r", open_loop, stem="myarm")
+    assert refused(toml) == (f"robofmu step: --robot: {toml}: robot 'myarm' has no controller and plant blocks "
+                             "(its blocks: trajectory, ik, fk)")
+    assert refused("myarm").startswith("robofmu step: --robot: unknown robot 'myarm'; known robots: ")
+    assert list(fmus.iterdir()) == [] and not out.exists()
+
+
+def build_in_child(robot, out: Path, blocks: list[str], cwd: Path) -> list[Path]:
+    """``build(robot, out, blocks=blocks)`` in a new process, returning its paths: the code the FMUs
+    bundle is then the code a later ``robofmu`` process runs, even if a colleague edits
+    robofmu.components during the session (this process's FMU check would refuse them)."""
+    script = ("import sys\nfrom robofmu.system.packaging.build import build\n"
+              "for path in build(sys.argv[1], sys.argv[2], blocks=sys.argv[3].split(','), log=lambda *_: None):\n"
+              "    print(path)\n")
+    done = subprocess.run([sys.executable, "-c", script, str(robot), str(out), ",".join(blocks)], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return [Path(line) for line in done.stdout.splitlines()]
+
+
+@pytest.mark.slow
+def test_step_on_a_robot_toml_equals_the_robot_by_name(copy_robot, tmp_path):
+    """``robofmu step --robot ./planar2r/myarm.toml --fmus mine`` (planar2r copied outside the
+    package as myarm, pd kp 300; its controller and plant built into mine/myarm/) prints the
+    table of the package's planar2r stepped with --kp 300 from its own FMUs, but for the robot's
+    name, and writes the same CSVs, to the last digit; the step arrives and the sampled-data
+    prediction holds to 1 % of the amplitude. With FMUs of another robot only, it says how to
+    build its own."""
+    toml = copy_robot("planar2r", myarm, stem="myarm")
+    blocks = ["controller", "plant"]
+    assert build_in_child(toml, tmp_path / "mine", blocks, tmp_path) == \
+        [tmp_path / "mine" / "myarm" / f"{b}.fmu" for b in blocks]
+    assert build_in_child("planar2r", "theirs", blocks, tmp_path) == [Path("theirs", "planar2r", f"{b}.fmu")
+                                                                      for b in blocks]
+    common = ["--step-size", "0.005", "--stop-time", "0.6"]
+    mine = cli("step", "--robot", "./planar2r/myarm.toml", "--fmus", "mine", "--out", "out-mine", *common,
+               cwd=tmp_path)
+    theirs = cli("step", "--robot", "planar2r", "--kp", KP, "--fmus", "theirs", "--out", "out-theirs", *common,
+                 cwd=tmp_path)
+    assert mine.returncode == 0 and theirs.returncode == 0, mine.stderr + theirs.stderr
+    *table, wrote = mine.stdout.splitlines()
+    *their_table, their_wrote = theirs.stdout.splitlines()
+    assert table[0] == ("myarm: step q1 +0.02 rad, q2 +0.02 rad from q0 = (0 rad, 1 rad); kp 300, kd 40, ki 0; "
+                        "h 5 ms; algorithm gauss-seidel")
+    assert their_table[0] == "planar2r" + table[0][len("myarm"):]
+    assert table[1:] == their_table[1:] and table[-1] == "best match: sampled"
+    names = ["step_h5ms_cosim.csv", "step_h5ms_compare.csv", "step_h5ms.png"]
+    assert wrote == "wrote " + ", ".join(f"out-mine/{name}" for name in names)
+    assert their_wrote == "wrote " + ", ".join(f"out-theirs/{name}" for name in names)
+    for name in names[:2]:
+        assert (tmp_path / "out-mine" / name).read_text() == (tmp_path / "out-theirs" / name).read_text(), name
+    with open(tmp_path / "out-mine" / "step_h5ms_compare.csv") as f:
+        columns = f.readline().strip().split(",")
+    data = np.loadtxt(tmp_path / "out-mine" / "step_h5ms_compare.csv", delimiter=",", skiprows=1)
+    assert data.shape == (121, len(columns))                                 # t = 0 .. 0.6 s by 5 ms
+    cosim = data[:, [columns.index(f"cosim_q{j} [rad]") for j in (1, 2)]]
+    sampled = data[:, [columns.index(f"pred_sampled_q{j} [rad]") for j in (1, 2)]]
+    np.testing.assert_allclose(cosim[0], [0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(cosim[-1], [0.02, 0.02], rtol=0.01)           # poles -10, -30 1/s: arrived
+    assert 1e-5 < np.abs(cosim - sampled).max() / 0.02 < 0.01                # within 1 % of the amplitude
+    one_line_error(cli("step", "--robot", "./planar2r/myarm.toml", "--fmus", "theirs", cwd=tmp_path), "step",
+                   "--fmus theirs: no myarm/controller.fmu, myarm/plant.fmu",
+                   f"robofmu build {toml.resolve()} --out theirs")

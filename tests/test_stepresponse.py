@@ -316,6 +316,7 @@ def test_step_command_prismatic_robot(fmu_root, tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, option", [
     (["--robot", "nobody"], "--robot"),
+    (["--robot", "./nobody/nobody.toml"], "--robot"),      # a robot TOML path that does not exist
     (["--robot", "rrp", "--gains", "pid"], "--gains"),
     (["--kp", "-1"], "--kp"),
     (["--kd", "nan"], "--kd"),

@@ -6,7 +6,7 @@ finding. (Not a module anyone imports; ruff skips it.)
 """
 # Blocks register by (kind, variant) in Block.__init_subclass__; made by kind, never by class name.
 ControllerBlock, FKBlock, IKBlock, JacobianBlock, PlantBlock
-WaypointsBlock, LineBlock, JointBangBangBlock, CircleBlock, PoseLineBlock
+WaypointsBlock, LineBlock, JointBangBangBlock, CircleBlock, PoseLineBlock, PoseWaypointsBlock
 abstract                # Block.__init_subclass__: a class setting it registers nothing
 
 # IK solvers register by name in their family's registry (the robot description names one).

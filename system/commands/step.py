@@ -8,6 +8,9 @@ Ctrl-C with 130 (:func:`~robofmu.system.usage.stopped`).
 amplitude (``--amplitude``). Older spellings still work and warn in one line: ``--t-end``
 (``--stop-time``), ``--driver master|jacobi`` (``--algorithm gauss-seidel|jacobi``),
 ``--step-height`` / ``--height`` (``--amplitude``).
+
+``--robot`` is a robot of the package by name or the path of a robot TOML anywhere (as for
+``robofmu build``); either way its FMUs are ``<--fmus>/<its name>/{controller,plant}.fmu``.
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ import math
 from pathlib import Path
 
 from robofmu.system import defaults, options
-from robofmu.system.usage import UsageError, check_fmu_folder, check_times, check_writable, say, stopped
+from robofmu.system.usage import UsageError, check_fmu_folder, check_times, check_writable, one_line, say, stopped
 
 HELP = "co-simulate a joint reference step and compare it with linear predictions"
 
@@ -60,9 +63,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     "sampled-data loop), and their max deviation in % of the amplitude. Gains: a "
                     "gain set of the robot's description (--gains), explicit values (--kp/--kd/--ki: "
                     "kp > 0, kd > 0, ki >= 0), or designed from --settling-time and --overshoot.")
-    p.add_argument("--robot", metavar="NAME",
-                   help="a described robot with a controller and a plant block (default: the first of them "
-                        "by name)")
+    p.add_argument("--robot", metavar="NAME|PATH",
+                   help="a robot with a controller and a plant block: a robot of the package by name, or the "
+                        "path of a robot TOML (e.g. ./myarm/myarm.toml; its FMUs in --fmus/<its name>/, as "
+                        "robofmu build writes them) (default: the first package robot that has both, by name)")
     p.add_argument("--gains", metavar="SET",
                    help="a gain set of the robot's description, [gains.SET] (default: its default_gains)")
     p.add_argument("--kp", type=float, help="proportional gain (1/s^2, > 0), overrides the set's")
@@ -131,16 +135,15 @@ def _design(args):
         raise UsageError(f"--settling-time: {exc}") from None
 
 
-def _gains(args, robot: str, design) -> tuple[float, float, float]:
-    """kp, kd, ki: designed, else the robot's gain set (``--gains``, default its ``default_gains``)
-    with ``--kp`` / ``--kd`` / ``--ki`` over it, by the gains' rule (UsageError naming the option)."""
+def _gains(args, description, design) -> tuple[float, float, float]:
+    """kp, kd, ki: designed, else the gain set of the robot's ``description`` (``--gains``, default
+    its ``default_gains``) with ``--kp`` / ``--kd`` / ``--ki`` over it, by the gains' rule
+    (UsageError naming the option)."""
     from robofmu.components.control import check_gains
     from robofmu.components.parameters import ParameterError
-    from robofmu.components.robots import load_description
 
     if design is not None:
         return design.kp, design.kd, design.ki
-    description = load_description(robot)
     try:
         seed = description.gain_set(description.default_gains if args.gains is None else args.gains)
     except ValueError as exc:
@@ -153,22 +156,30 @@ def _gains(args, robot: str, design) -> tuple[float, float, float]:
         raise UsageError(f"--{exc.name}: {exc.problem}") from None
 
 
-def _robot(args) -> str:
-    """``--robot``, default the first robot a step experiment can run on; UsageError naming it."""
-    from robofmu.components.robots import available
-    from robofmu.system.stepresponse import steppable_robots
+def _robot(args):
+    """The description of ``--robot`` (a package robot's name or a robot TOML's path), default the
+    first package robot a step experiment can run on; UsageError naming the option: an unknown
+    name, a path that does not exist, a TOML that is not a valid description (its DescriptionError,
+    naming file and key), a robot without a controller and a plant block."""
+    from robofmu.components.robots import is_robot_file, load_description
+    from robofmu.system.stepresponse import CONTROLLER, PLANT, steppable_robots
 
-    robots = steppable_robots()
     if args.robot is None:
+        robots = steppable_robots()
         if not robots:
             raise UsageError("--robot: no described robot has a controller and a plant block")
-        return robots[0]
-    if args.robot not in available():
-        raise UsageError(f"--robot: unknown robot {args.robot!r}; known robots: {', '.join(available())}")
-    if args.robot not in robots:
+        return load_description(robots[0])
+    try:
+        description = load_description(args.robot)
+    except ValueError as exc:         # unknown name, missing file, a folder, DescriptionError
+        raise UsageError(f"--robot: {one_line(exc)}") from None
+    if not {CONTROLLER, PLANT} <= set(description.blocks):
+        if is_robot_file(args.robot):
+            raise UsageError(f"--robot: {args.robot}: robot {description.name!r} has no controller and plant "
+                             f"blocks (its blocks: {', '.join(description.blocks)})")
         raise UsageError(f"--robot: robot {args.robot!r} has no controller and plant blocks; robots that "
-                         f"have: {', '.join(robots)}")
-    return args.robot
+                         f"have: {', '.join(steppable_robots())}")
+    return description
 
 
 def main(args) -> int:
@@ -177,13 +188,14 @@ def main(args) -> int:
         write_csv
 
     try:
-        robot = _robot(args)
+        robot = _robot(args)                 # its description: resolved once
         check_times(args.step_size, args.stop_time)
         try:
             setup = step_setup(robot, args.amplitude, args.joint, args.q0)
         except ValueError as exc:
             argument, _, message = str(exc).partition(": ")
-            option = {"amplitude": "--amplitude", "joint": "--joint", "q0": "--q0"}.get(argument)
+            option = {"amplitude": "--amplitude", "joint": "--joint", "q0": "--q0",
+                      "robot": "--robot"}.get(argument)
             raise UsageError(f"{option}: {message}" if option else f"--robot: {exc}") from None
         design = _design(args)
         kp, kd, ki = _gains(args, robot, design)

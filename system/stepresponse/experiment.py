@@ -12,6 +12,11 @@ the recorded positions against :func:`~.linear.predict` for every model, joint b
 Units come from the robot model: a revolute joint's position is in rad and its effort in N.m,
 a prismatic joint's in m and N. The size of the reference step, its amplitude, is in each joint's
 own unit ("step" alone is the communication step, ``h``).
+
+A robot is given as everywhere in robofmu: a robot of the package by name, the path of a robot
+TOML anywhere (str or Path), or its :class:`~robofmu.components.robots.RobotDescription`; it is
+resolved once per call (:func:`~robofmu.components.robots.load_description`). Its FMUs are
+``<fmu_dir>/<its name>/{controller,plant}.fmu``, as ``robofmu build`` writes them.
 """
 from __future__ import annotations
 
@@ -23,7 +28,7 @@ from typing import Sequence
 import numpy as np
 
 from robofmu.components.control import check_gains
-from robofmu.components.robots import available, load_description, load_model
+from robofmu.components.robots import ROBOTS_DIR, RobotDescription, available, load_description, load_model
 
 from robofmu.system import defaults
 from robofmu.system.diagram import BlockSpec, System
@@ -46,29 +51,58 @@ PLANT = "plant"
 #: orders above the plant's integration error.
 DEFAULT_AMPLITUDE = {"rad": 0.02, "m": 0.02}
 
+#: A robot as the functions here take it: a package robot's name, a robot TOML's path, or its description.
+Robot = str | Path | RobotDescription
+
 
 def steppable_robots() -> list[str]:
-    """The described robots a step experiment can run on: those with a controller and a plant
-    block, sorted."""
+    """The package's robots a step experiment can run on: those with a controller and a plant
+    block, sorted by name. (A robot TOML of one's own steps too when it has both blocks.)"""
     return [name for name in available() if {CONTROLLER, PLANT} <= set(load_description(name).blocks)]
 
 
-def default_amplitudes(robot: str) -> np.ndarray:
+def _description(robot: Robot) -> RobotDescription:
+    """``robot``'s description: itself, or :func:`load_description` of a name or TOML path (ValueError
+    in one line: an unknown robot, a missing file, a malformed description naming file and key)."""
+    return robot if isinstance(robot, RobotDescription) else load_description(robot)
+
+
+def _steppable(robot: Robot) -> RobotDescription:
+    """:func:`_description`, refused (ValueError starting ``robot:``) without a controller or plant block."""
+    description = _description(robot)
+    missing = [block for block in (CONTROLLER, PLANT) if block not in description.blocks]
+    if missing:
+        raise ValueError(f"robot: {description.name!r} has no {' and no '.join(missing)} block "
+                         f"(its blocks: {', '.join(description.blocks)})")
+    return description
+
+
+def _robot_argument(description: RobotDescription) -> str:
+    """How to name a robot again, to ``robofmu build`` or :func:`load_description`: its name for a
+    robot of the package, else the (absolute) path of its TOML."""
+    packaged = ROBOTS_DIR / description.name / f"{description.name}.toml"
+    if packaged.is_file() and Path(description.path).resolve() == packaged.resolve():
+        return description.name
+    return str(Path(description.path).resolve())
+
+
+def default_amplitudes(robot: Robot) -> np.ndarray:
     """The default amplitude of every joint of ``robot`` (:data:`DEFAULT_AMPLITUDE`), signed
     so that the step from ``home`` stays within the joint's limits (downward where home + amplitude
     would pass the upper limit, as the rrp slide's home at its full extension).
 
     Parameters
     ----------
-    robot : str
-        A described robot (``robofmu.components.robots.available()``).
+    robot : str, Path or RobotDescription
+        A robot of the package by name (``robofmu.components.robots.available()``), the path of a
+        robot TOML, or a description.
 
     Returns
     -------
     numpy.ndarray, shape (n,)
         In each joint's unit (rad or m).
     """
-    model = load_model(robot)
+    model = load_model(_description(robot))
     return _signed_amplitudes(model, model.configuration("home"))
 
 
@@ -86,6 +120,7 @@ class StepSetup:
     Attributes
     ----------
     robot : str
+        The robot's name (its FMUs' folder under the FMU collection).
     joints : list of int
         Stepped joints, numbered from 1 like the FMU variables.
     q0 : numpy.ndarray, shape (n,)
@@ -109,15 +144,16 @@ class StepSetup:
     symbols: list
 
 
-def step_setup(robot: str, amplitude: float | Sequence[float] | None = None,
+def step_setup(robot: Robot, amplitude: float | Sequence[float] | None = None,
                joint: int | Sequence[int] | None = None,
                q0: Sequence[float] | None = None) -> StepSetup:
     """Resolve the stepped joints, start configuration and amplitudes of a step of ``robot``.
 
     Parameters
     ----------
-    robot : str
-        A described robot with a controller and a plant block.
+    robot : str, Path or RobotDescription
+        A robot with a controller and a plant block: a robot of the package by name, the path of
+        a robot TOML, or a description.
     amplitude : float, sequence of float or None
         Size of the reference step (joint units). None: :data:`DEFAULT_AMPLITUDE` per joint,
         downward where it would pass the joint's upper limit. A float: that amplitude on every
@@ -135,15 +171,13 @@ def step_setup(robot: str, amplitude: float | Sequence[float] | None = None,
     Raises
     ------
     ValueError
-        Unknown robot, no controller or plant block, a joint out of range or repeated, a
-        ``q0`` or ``amplitude`` of the wrong length, a non-finite value or a zero amplitude; the
-        message starts with the argument's name.
+        Unknown robot, a robot TOML that does not exist or is not a valid description, no
+        controller or plant block, a joint out of range or repeated, a ``q0`` or ``amplitude`` of
+        the wrong length, a non-finite value or a zero amplitude; the message starts with the
+        argument's name (but for :func:`~robofmu.components.robots.load_description`'s own).
     """
-    description = load_description(robot)
-    missing = [block for block in (CONTROLLER, PLANT) if block not in description.blocks]
-    if missing:
-        raise ValueError(f"robot: {robot!r} has no {' and no '.join(missing)} block "
-                         f"(its blocks: {', '.join(description.blocks)})")
+    description = _steppable(robot)
+    robot = description.name
     model = load_model(description)
     n = model.n
     if joint is None:
@@ -190,7 +224,7 @@ def _step_text(joints: Sequence[int], amplitudes: Sequence[float], symbols: Sequ
     return ", ".join(f"{symbols[j - 1]} {a:+g} {units[j - 1]}" for j, a in zip(joints, amplitudes))
 
 
-def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
+def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: Robot,
                 amplitude: float | Sequence[float] | None = None, h: float = defaults.STEP_SIZE,
                 stop_time: float = defaults.STOP_TIME, joint: int | Sequence[int] | None = None,
                 q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM) -> System:
@@ -204,12 +238,13 @@ def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, r
     Parameters
     ----------
     fmu_dir : str or Path
-        Folder holding ``<robot>/controller.fmu`` and ``<robot>/plant.fmu``.
+        Folder holding ``<name>/controller.fmu`` and ``<name>/plant.fmu``, ``<name>`` the robot's
+        name (its description's ``name``, also for a robot TOML given by path).
     kp, kd, ki : float
         Gains (1/s^2, 1/s, 1/s^3), the same on every joint, by the gains' rule
         (:func:`~robofmu.components.control.check_gains`: ParameterError naming the gain).
-    robot : str
-        A described robot with a controller and a plant block.
+    robot : str, Path or RobotDescription
+        A robot with a controller and a plant block: by name, robot TOML path or description.
     amplitude, joint, q0
         As for :func:`step_setup` (joint units; default amplitudes, every joint, ``home``).
     h, stop_time : float
@@ -220,24 +255,27 @@ def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, r
     Returns
     -------
     System
-        Named ``<robot>-step`` (``extra["robot"]`` the robot); blocks :data:`CONTROLLER` and
-        :data:`PLANT`.
+        Named ``<name>-step``; ``extra["robot"]`` names the robot again (:func:`_robot_argument`:
+        its name for a robot of the package, else its TOML's absolute path); blocks
+        :data:`CONTROLLER` and :data:`PLANT`.
     """
     kp, kd, ki = check_gains(kp, kd, ki)
-    setup = step_setup(robot, amplitude, joint, q0)
+    description = _steppable(robot)
+    setup = step_setup(description, amplitude, joint, q0)
+    name = description.name
     return System(
-        blocks=[BlockSpec(CONTROLLER, f"{robot}/controller.fmu",
+        blocks=[BlockSpec(CONTROLLER, f"{name}/controller.fmu",
                           {"kp": kp, "kd": kd, "ki": ki, "q_ref": setup.q_ref.tolist()}),
-                BlockSpec(PLANT, f"{robot}/plant.fmu", {"q0": setup.q0.tolist()})],
+                BlockSpec(PLANT, f"{name}/plant.fmu", {"q0": setup.q0.tolist()})],
         wires=[f"{PLANT}.q -> {CONTROLLER}.q", f"{PLANT}.qd -> {CONTROLLER}.qd",
                f"{CONTROLLER}.tau -> {PLANT}.tau"],
-        fmu_dir=Path(fmu_dir), name=f"{robot}-step", stop_time=float(stop_time), step=float(h),
-        algorithm=algorithm, extra={"robot": robot},
+        fmu_dir=Path(fmu_dir), name=f"{name}-step", stop_time=float(stop_time), step=float(h),
+        algorithm=algorithm, extra={"robot": _robot_argument(description)},
         description="reference step " + _step_text(setup.joints, setup.amplitudes[np.array(setup.joints) - 1],
                                                    setup.symbols, setup.joint_units))
 
 
-def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: str,
+def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: Robot,
                     amplitude: float | Sequence[float] | None = None, h: float = defaults.STEP_SIZE,
                     stop_time: float = defaults.STOP_TIME, joint: int | Sequence[int] | None = None,
                     q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM) -> Result:
@@ -246,11 +284,11 @@ def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, 
     Parameters
     ----------
     fmu_dir : str or Path
-        Folder holding ``<robot>/{controller,plant}.fmu`` (e.g. ``fmus``).
+        Folder holding ``<name>/{controller,plant}.fmu`` (e.g. ``fmus``), ``<name>`` the robot's name.
     kp, kd, ki : float
         Gains (1/s^2, 1/s, 1/s^3).
-    robot : str
-        A described robot with a controller and a plant block.
+    robot : str, Path or RobotDescription
+        A robot with a controller and a plant block: by name, robot TOML path or description.
     amplitude : float, sequence of float or None
         Size of the reference step in joint units (see :func:`step_setup`); default
         :data:`DEFAULT_AMPLITUDE` (0.02 rad or 0.02 m per joint).
@@ -270,19 +308,22 @@ def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, 
     Result
         Recorded ``plant.q[j]``, ``plant.qd[j]`` (rad or m, rad/s or m/s) and
         ``controller.tau[j]`` (N.m or N) at t_k = k h, shape (n_steps + 1,) each, with their
-        units; ``info`` adds ``robot, kp, kd, ki, h, amplitudes (list, n), joints, q0, q_ref
-        (lists, n), joint_units, effort_units, symbols (lists, n), algorithm, warnings``.
+        units; ``info`` adds ``robot`` (its name), ``robot_file`` (its TOML), ``kp, kd, ki, h,
+        amplitudes (list, n), joints, q0, q_ref (lists, n), joint_units, effort_units, symbols
+        (lists, n), algorithm, warnings``.
     """
     h = check_step(h)
     if algorithm not in defaults.ALGORITHMS:
         raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(defaults.ALGORITHMS)}")
-    setup = step_setup(robot, amplitude, joint, q0)
-    system = step_system(fmu_dir, kp, kd, ki, robot=robot, amplitude=setup.amplitudes, h=h,
+    description = _steppable(robot)
+    setup = step_setup(description, amplitude, joint, q0)
+    system = step_system(fmu_dir, kp, kd, ki, robot=description, amplitude=setup.amplitudes, h=h,
                          stop_time=stop_time, joint=setup.joints, q0=setup.q0, algorithm=algorithm)
     master = Master(system, record=[f"{PLANT}.q*", f"{CONTROLLER}.tau*"])
     diagram_warnings = master.check()
     result = master.run(float(stop_time), h, algorithm)
-    result.info.update(robot=robot, kp=float(kp), kd=float(kd), ki=float(ki), h=h,
+    result.info.update(robot=description.name, robot_file=str(description.path), kp=float(kp), kd=float(kd),
+                       ki=float(ki), h=h,
                        amplitudes=setup.amplitudes.tolist(), joints=list(setup.joints), q0=setup.q0.tolist(),
                        q_ref=setup.q_ref.tolist(), joint_units=list(setup.joint_units),
                        effort_units=list(setup.effort_units), symbols=list(setup.symbols),
@@ -332,6 +373,7 @@ class Comparison:
     algorithm : str
         The master's algorithm (one of :data:`~robofmu.system.defaults.ALGORITHMS`).
     robot : str
+        The robot's name.
     q0 : list of float, length n_joints
         Start configuration (joint units).
     joint_units, effort_units, symbols : list of str, length n_joints
@@ -617,7 +659,7 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
     return path
 
 
-def demo_cases(robot: str, fmu_dir: str | Path, out_dir: str | Path, h: float = defaults.STEP_SIZE,
+def demo_cases(robot: Robot, fmu_dir: str | Path, out_dir: str | Path, h: float = defaults.STEP_SIZE,
                stop_time: float = defaults.STOP_TIME) -> list[tuple[str, tuple[Comparison, Path]]]:
     """The default step of ``robot`` under each gain set of its description, compared and plotted.
 
@@ -625,12 +667,12 @@ def demo_cases(robot: str, fmu_dir: str | Path, out_dir: str | Path, h: float = 
 
     Parameters
     ----------
-    robot : str
-        A described robot with a controller and a plant block.
+    robot : str, Path or RobotDescription
+        A robot with a controller and a plant block: by name, robot TOML path or description.
     fmu_dir : str or Path
-        Folder holding ``<robot>/{controller,plant}.fmu``.
+        Folder holding ``<name>/{controller,plant}.fmu``, ``<name>`` the robot's name.
     out_dir : str or Path
-        Folder for the figures, ``step_<robot>_<gain set>.png`` (created).
+        Folder for the figures, ``step_<name>_<gain set>.png`` (created).
     h, stop_time : float
         Communication step and stop time (s).
 
@@ -641,9 +683,10 @@ def demo_cases(robot: str, fmu_dir: str | Path, out_dir: str | Path, h: float = 
         and the comparison with its figure.
     """
     cases = []
-    for name, gains in load_description(robot).gains.items():
-        comparison = compare(cosimulate_step(fmu_dir, gains.kp, gains.kd, gains.ki, robot=robot, h=h,
+    description = _steppable(robot)
+    for name, gains in description.gains.items():
+        comparison = compare(cosimulate_step(fmu_dir, gains.kp, gains.kd, gains.ki, robot=description, h=h,
                                              stop_time=stop_time))
-        figure = plot_comparison(comparison, out_dir, name=f"step_{robot}_{name}")
+        figure = plot_comparison(comparison, out_dir, name=f"step_{description.name}_{name}")
         cases.append((f"{name}: kp {gains.kp:g}, kd {gains.kd:g}, ki {gains.ki:g}", (comparison, figure)))
     return cases

@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["COMPONENTS", "UNIT_TOLERANCE", "quaternion_of", "rotation_of"]
+__all__ = ["COMPONENTS", "UNIT_TOLERANCE", "canonical", "quaternion_of", "rotation_of"]
 
 #: The components' order on the ports (``quat_ref[1]`` is x, ..., ``quat_ref[4]`` is w).
 COMPONENTS = "xyzw"
@@ -20,10 +20,15 @@ COMPONENTS = "xyzw"
 UNIT_TOLERANCE = 1e-6
 
 
+def canonical(quaternion: list[float]) -> list[float]:
+    """The quaternion (x, y, z, w) with w >= 0 (q and -q are the same rotation)."""
+    x, y, z, w = quaternion
+    return [-x, -y, -z, -w] if w < 0.0 else [x, y, z, w]
+
+
 def quaternion_of(rotation) -> list[float]:
     """The unit quaternion (x, y, z, w) of a rotation matrix (3, 3), with w >= 0."""
-    x, y, z, w = pin.Quaternion(np.asarray(rotation, dtype=float)).coeffs().tolist()
-    return [-x, -y, -z, -w] if w < 0.0 else [x, y, z, w]
+    return canonical(pin.Quaternion(np.asarray(rotation, dtype=float)).coeffs().tolist())
 
 
 def rotation_of(quaternion) -> np.ndarray:
@@ -34,9 +39,13 @@ def rotation_of(quaternion) -> np.ndarray:
     ValueError
         If its norm differs from 1 by more than :data:`UNIT_TOLERANCE` (or is not finite).
     """
-    x, y, z, w = (float(c) for c in quaternion)
+    x, y, z, w = (quaternion.astype(float, copy=False).tolist() if isinstance(quaternion, np.ndarray)
+                  else [float(c) for c in quaternion])
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if not abs(norm - 1.0) <= UNIT_TOLERANCE:
         raise ValueError(f"the orientation quaternion (x, y, z, w) = ({x:.9g}, {y:.9g}, {z:.9g}, {w:.9g}) "
                          f"has norm {norm:.9g}, not 1 (a unit quaternion is needed)")
-    return pin.Quaternion(w / norm, x / norm, y / norm, z / norm).toRotationMatrix()
+    # Pinocchio's (x, y, z, qx, qy, qz, qw) placement: the rotation of Quaternion(w, x, y, z), without
+    # the cost of that constructor's overload resolution
+    pose = pin.XYZQUATToSE3(np.array([0.0, 0.0, 0.0, x / norm, y / norm, z / norm, w / norm]))
+    return np.ascontiguousarray(pose.rotation)

@@ -2,7 +2,7 @@
 task frame's orientation as a unit quaternion (x, y, z, w), frame to world."""
 from __future__ import annotations
 
-from ..orientation import COMPONENTS, quaternion_of
+from ..orientation import COMPONENTS
 from .base import Block, vector_names
 
 
@@ -28,6 +28,9 @@ class FKBlock(Block):
 
     def output(self, t):
         q = self.values[self.q]
-        self.values[self.x] = self.robot.fk(q)
-        if self.quaternion is not None:
-            self.values[self.quaternion] = quaternion_of(self.robot.rotation(q))
+        if self.quaternion is None:
+            self.values[self.x] = self.robot.fk(q)
+            return
+        x, quaternion = self.robot.fk_quaternion(q)
+        self.values[self.x] = x
+        self.values[self.quaternion] = quaternion

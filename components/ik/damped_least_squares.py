@@ -28,7 +28,10 @@ J# = V diag(sigma / (sigma^2 + lambda^2)) U^T, with lambda = 0 while the smalles
 is at least ``singular_value`` and lambda^2 = ``damping``^2 (1 - (sigma_min / singular_value)^2)
 below (bounded rates near a singularity, at the price of a task error the status reports).
 N = I - V_r V_r^T (V_r: the first task_rows columns of V) projects on the null space exactly, so
-the secondary motion changes no task coordinate: J N = 0. The secondary motion
+the secondary motion changes no task coordinate: J N = 0. Clear of the threshold (sigma_min at
+least ``CLEAR`` singular_value, sigma_min^2 the smallest eigenvalue of J J^T), the same J# and N
+come without the singular vectors: J# = J^T (J J^T)^-1 (by Cholesky; J^-1 by LU for a square task)
+and V_r V_r^T = J# J; only near a singularity is J decomposed in full. The secondary motion
 qd_0 = -posture_gain (q - rest) + limit_gain (push away from a limit closer than
 ``limit_clearance``) and qdd_0 = d qd_0/dq qd draw a redundant arm towards its rest posture and
 away from its limits (nothing for a square task: N = 0). qdd is the time derivative of qd: its
@@ -47,11 +50,13 @@ passed on.
 from __future__ import annotations
 
 import math
+from operator import mul
 
 import numpy as np
 import pinocchio as pin
-from scipy.linalg.lapack import dgesdd as gesdd, dgesv as gesv
+from scipy.linalg.lapack import dgesdd as gesdd, dgesv as gesv, dposv as posv, dsyev as syev
 
+from ..floats import FloatWriter
 from ..orientation import rotation_of
 from ..parameters import Parameter
 from .base import JOINT_UNIT, Diagnostic, IKSolver, Unreachable
@@ -64,6 +69,15 @@ CONVERGED, NOT_CONVERGED, NEAR_SINGULAR, AT_LIMIT = 0, 1, 2, 3
 CORRECTION_DAMPING = 1e-6
 #: The largest joint margin reported where no joint has a finite limit (rad or m).
 NO_LIMIT_MARGIN = 1e6
+#: Where the smallest singular value, from the eigenvalues of J J^T, is at least CLEAR times
+#: ``singular_value``, the rates need no singular vectors; its relative error there is
+#: ~eps (sigma_max / sigma_min)^2: at most ~3e-13 for the arms (sigma_max ~2, sigma_min >= 0.04),
+#: ~1e-14 along their paths. Closer to a singularity the full SVD gives sigma_min (to
+#: ~eps sigma_max / sigma_min) and the damped rates.
+CLEAR = 2.0
+#: A joint farther than this (rad or m) inside limit_clearance of both its limits is outside both
+#: zones of the null-space push whatever the rounding of q - lower - clearance (a few 1e-16).
+FREE_MARGIN = 1e-9
 
 
 class DampedLeastSquaresIK(IKSolver):
@@ -140,7 +154,9 @@ class DampedLeastSquaresIK(IKSolver):
         if np.any(self.q_guess < self.lower) or np.any(self.q_guess > self.upper):
             raise ValueError(f"IK solver {self.kind!r}: q_guess = {self.q_guess.tolist()} lies outside "
                              "the joint limits")
-        self._limited = np.isfinite(self.lower) | np.isfinite(self.upper)
+        limited = np.flatnonzero(np.isfinite(self.lower) | np.isfinite(self.upper)).tolist()
+        # (lower, upper) of each joint with a limit, as floats: the margins are taken in floats
+        self._limited = [(float(self.lower[j]), float(self.upper[j]), j) for j in limited]
         self.m = robot.m
         self.rows = robot.task_rows
         self._position_rows = list(robot.description.task.axes)
@@ -150,14 +166,35 @@ class DampedLeastSquaresIK(IKSolver):
             raise ValueError(f"IK solver {self.kind!r}: {self.rows} task rows for {n} joints: more task "
                              "coordinates than joints cannot all be tracked")
         task_rows = self._position_rows + [3 + axis for axis in self._orientation_rows]
-        self._task_rows = slice(0, 6) if task_rows == list(range(6)) else task_rows     # a view where it can
-        self._all_orientation = slice(0, 3) if self._orientation_rows == [0, 1, 2] else self._orientation_rows
+        self._task_rows = _slice_if_consecutive(task_rows)            # a view where it can
+        self._all_orientation = _slice_if_consecutive(self._orientation_rows)
         self._posture_slope = np.full(n, -self.posture_gain)
+        self._bounds = list(zip(self.lower.tolist(), self.upper.tolist()))          # per joint, as floats
+        # the null-space motion's bounds per joint, as floats: (rest, lower, upper, clearance), and
+        # where a joint lies certainly outside both zones (by far more than rounding: 1e-9)
+        self._rest = self.rest.tolist()
+        self._zones = list(zip(self._rest, self.lower.tolist(), self.upper.tolist(), self.clearance.tolist()))
+        self._free = [(lower + clearance + FREE_MARGIN, upper - clearance - FREE_MARGIN)
+                      for _, lower, upper, clearance in self._zones]
         self._target_rotation = np.eye(3)
-        self._error = np.empty(self.rows)                # buffers of error(), consumed before its next call
-        self._error_jacobian = np.empty((self.rows, n))
+        self._target_quaternion = [0.0, 0.0, 0.0, 1.0]
+        # Buffers, each consumed within the call that fills it (the arrays returned are new)
+        self._identity = np.eye(n)
+        self._null = np.empty((n, n))
+        self._je = np.empty((self.rows, n))
         self._angular = np.empty((3, n))
-        self.start = self.q_guess.copy()
+        self._normal = np.empty((self.rows, self.rows))
+        self._normal_diagonal = self._normal.reshape(-1)[::self.rows + 1]            # a view
+        self._gains = np.empty(self.rows)
+        self._scaled = np.empty((n, self.rows))
+        self._inverse = np.empty((n, self.rows))
+        self._nu = np.empty(self.rows)                    # [xd; S_o R^T omega]
+        self._a = np.empty(self.rows)                     # [xdd; S_o R^T omegad], then minus Jdot qd
+        self._task_parts = (self._nu[:self.m], self._a[:self.m], self._nu[self.m:], self._a[self.m:])
+        self._qd0 = np.empty(n)
+        self._slope = np.empty(n)
+        self._write_qd0, self._write_slope = FloatWriter(self._qd0), FloatWriter(self._slope)
+        self.start = self.q_guess.tolist()
 
     def _configuration(self, name: str) -> np.ndarray:
         value = self.values[name]
@@ -169,69 +206,87 @@ class DampedLeastSquaresIK(IKSolver):
         return value
 
     def start_from(self, q, qd=None, qdd=None, elapsed=0.0):
+        """The start of the next solve (``self.start``, floats): ``q_guess`` if ``q`` is None, else
+        q + (elapsed qd + elapsed^2/2 qdd) (``q`` where no rates are given), clipped to the limits."""
         if q is None:
-            self.start = self.q_guess.copy()
+            self.start = self.q_guess.tolist()
             return
-        start = np.array(q, dtype=float)
-        if qd is not None and elapsed > 0.0:
-            start += elapsed * np.asarray(qd) + (0.5 * elapsed * elapsed) * np.asarray(qdd)
-        self.start = start
+        q = np.asarray(q, dtype=float).tolist()
+        if qd is None or not elapsed > 0.0:
+            self.start = [min(max(p, low), high) for p, (low, high) in zip(q, self._bounds)]
+            return
+        half = 0.5 * elapsed * elapsed
+        self.start = [min(max(p + (elapsed * v + half * a), low), high) for p, v, a, (low, high) in
+                      zip(q, np.asarray(qd, dtype=float).tolist(), np.asarray(qdd, dtype=float).tolist(),
+                          self._bounds)]
 
     # -- position level ----------------------------------------------------------------------
-    def error(self, q: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The tracked rows' error e(q) (task_rows,) and its Jacobian J_e (task_rows, n), for
-        position target ``x`` and the orientation target of the solve: buffers, valid until the
-        next call. Keeps the task Jacobian (:meth:`RobotModel.jacobian`) and the frame's
-        orientation at ``q`` for the rates."""
-        robot, m, e = self.robot, self.m, self._error
+    def _evaluate(self, q: np.ndarray, x: list[float]) -> tuple[float, float]:
+        """The residuals (position, orientation) of the tracked rows' error e(q) for position
+        target ``x`` and the orientation target of the solve. Keeps e (floats), the task Jacobian
+        (:meth:`RobotModel.jacobian`) and the frame's orientation at ``q`` for the corrections
+        (:meth:`_error_jacobian`) and the rates."""
+        robot, m = self.robot, self.m
         if not self._pose:
-            np.subtract(robot.fk(q), x, out=e)
+            e = [p - target for p, target in zip(robot.fk(q).tolist(), x)]
             self._jacobian = robot.jacobian(q)
-            return e, self._jacobian
-        position, rotation, full = robot.kinematics(q)
-        self._jacobian = full[self._task_rows]
-        self._rotation = rotation
-        np.subtract(position[self._position_rows], x, out=e[:m])
-        relative = self._target_rotation.T @ rotation
-        rows = self._all_orientation
-        e[m:] = pin.log3(relative)[rows]
-        J = self._error_jacobian
-        J[:m] = self._jacobian[:m]
-        np.dot(pin.Jlog3(relative), full[3:], out=self._angular)
-        J[m:] = self._angular[rows]
-        return e, J
+        else:
+            position, rotation, full = robot.kinematics(q)
+            self._full = full
+            self._jacobian = full[self._task_rows]
+            self._rotation = rotation
+            self._relative = self._target_rotation.T.dot(rotation)
+            p, log = position.tolist(), pin.log3(self._relative).tolist()
+            e = [p[i] - target for i, target in zip(self._position_rows, x)]
+            e += [log[i] for i in self._orientation_rows]
+        self._e = e
+        position, orientation = e[:m], e[m:]
+        return math.sqrt(sum(map(mul, position, position))), math.sqrt(sum(map(mul, orientation, orientation)))
 
-    def _residuals(self, e: np.ndarray) -> tuple[float, float]:
-        values = e.tolist()
-        m = self.m
-        return (math.sqrt(sum(v * v for v in values[:m])), math.sqrt(sum(v * v for v in values[m:])))
+    def _error_jacobian(self) -> np.ndarray:
+        """J_e (task_rows, n) at the joints of the last :meth:`_evaluate`: a buffer for a pose task."""
+        if not self._pose:
+            return self._jacobian
+        J, m, rows = self._je, self.m, self._all_orientation
+        J[:m] = self._jacobian[:m]
+        if rows == slice(0, 3):
+            np.dot(pin.Jlog3(self._relative), self._full[3:], out=J[m:])
+        else:
+            np.dot(pin.Jlog3(self._relative), self._full[3:], out=self._angular)
+            J[m:] = self._angular[rows]
+        return J
 
     def position(self, x, quaternion=None):
         """Joint positions (n,) for position target ``x`` and, for a pose task, orientation target
         ``quaternion`` (x, y, z, w; default: the last one given), with ``self.at_limit`` and
         ``self.report`` filled in. It raises nothing: the report says how good the result is."""
         if quaternion is not None and self._pose:
-            self._target_rotation = rotation_of(quaternion)
-        lower, upper = self.lower, self.upper
-        q = np.minimum(np.maximum(self.start, lower), upper)
-        e, J = self.error(q, x)
-        position, orientation = self._residuals(e)
+            target = np.asarray(quaternion, dtype=float).tolist()
+            if target != self._target_quaternion:        # the rotation of an unchanged target is kept
+                self._target_rotation = rotation_of(target)
+                self._target_quaternion = target
+        x = np.asarray(x, dtype=float).tolist()
+        bounds, values = self._bounds, self.start       # the joints in floats, within their limits
+        q = np.array(values)
+        position, orientation = self._evaluate(q, x)
         iterations = 0
+        normal, diagonal = self._normal, self._normal_diagonal      # diagonal: a view of normal's
         while not (position <= self.position_tolerance and orientation <= self.orientation_tolerance) \
                 and iterations < self.max_iterations:
-            scale = max(1.0, float(np.abs(J).max()))
-            normal = J @ J.T
-            normal.flat[::self.rows + 1] += (CORRECTION_DAMPING * scale) ** 2
-            step = J.T @ gesv(normal, e)[2]
-            if not math.isfinite(float(step.sum())):
+            J = self._error_jacobian()
+            scale = max(1.0, max(map(abs, J.ravel().tolist())))       # the largest |J_ij|, at least 1
+            np.dot(J, J.T, out=normal)
+            np.add(diagonal, (CORRECTION_DAMPING * scale) ** 2, out=diagonal)
+            step = J.T.dot(gesv(normal, self._e)[2]).tolist()
+            if not math.isfinite(sum(step)):
                 break                                   # no finite correction: not converged
-            q -= step
-            np.maximum(q, lower, out=q)
-            np.minimum(q, upper, out=q)
+            values = [min(max(v - dv, low), high) for v, dv, (low, high) in zip(values, step, bounds)]
+            q = np.array(values)
             iterations += 1
-            e, J = self.error(q, x)
-            position, orientation = self._residuals(e)
-        self.at_limit = bool((q == lower).any() or (q == upper).any())
+            position, orientation = self._evaluate(q, x)
+        margins = [min(values[j] - low, high - values[j]) for low, high, j in self._limited]
+        self._margin = min(margins) if margins else NO_LIMIT_MARGIN
+        self.at_limit = 0.0 in margins          # q lies within its limits: a margin is 0 exactly on one
         self.report["iterations"] = float(iterations)
         self.report["position_residual"] = position
         self.report["orientation_residual"] = orientation
@@ -240,55 +295,81 @@ class DampedLeastSquaresIK(IKSolver):
 
     # -- rate level ----------------------------------------------------------------------------
     def secondary(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The null-space motion qd_0 (n,) and its derivative d qd_0 / dq, a diagonal (n,)."""
-        qd0 = self.posture_gain * (self.rest - q)
-        if self.limit_gain == 0.0:
-            return qd0, self._posture_slope
-        low = q - self.lower - self.clearance            # < 0: inside the lower zone
-        high = self.upper - q - self.clearance           # < 0: inside the upper zone
-        qd0 += self.limit_gain * (np.minimum(high, 0.0) - np.minimum(low, 0.0))
-        return qd0, self._posture_slope - self.limit_gain * ((low < 0.0) | (high < 0.0))
+        """The null-space motion qd_0 (n,) and its derivative d qd_0 / dq, a diagonal (n,):
+        buffers, valid until the next call."""
+        posture, push = self.posture_gain, self.limit_gain
+        values = q.tolist()
+        if push == 0.0 or all(low < v < high for v, (low, high) in zip(values, self._free)):
+            self._write_qd0([posture * (rest - v) for v, rest in zip(values, self._rest)])
+            return self._qd0, self._posture_slope
+        qd0, inside = [], []
+        for v, (rest, lower, upper, clearance) in zip(values, self._zones):
+            low = v - lower - clearance                 # < 0: inside the lower zone
+            high = upper - v - clearance                # < 0: inside the upper zone
+            zone = push != 0.0 and (low < 0.0 or high < 0.0)
+            qd0.append(posture * (rest - v) + push * (min(high, 0.0) - min(low, 0.0)) if zone
+                       else posture * (rest - v))
+            inside.append(zone)
+        self._write_qd0(qd0)
+        if not any(inside):
+            return self._qd0, self._posture_slope
+        self._write_slope([-posture - push if zone else -posture for zone in inside])
+        return self._qd0, self._slope
 
     def solve(self, x, xd, xdd, quaternion=None, omega=None, omegad=None):
-        robot, m, rows = self.robot, self.m, self.rows
-        for name in ("joint_limit_margin", "smallest_singular_value"):
-            self.report[name] = 0.0
-        self.report["status"] = float(NOT_CONVERGED)
-        q = self.position(np.asarray(x, dtype=float), quaternion)
-        U, sigma, Vt, _ = gesdd(self._jacobian, compute_uv=1, full_matrices=1)     # at q (position())
-        smallest = float(sigma[-1])
+        robot, rows, report = self.robot, self.rows, self.report
+        report["joint_limit_margin"] = report["smallest_singular_value"] = 0.0
+        report["status"] = float(NOT_CONVERGED)
+        q = self.position(x, quaternion)
+        J = self._jacobian                               # at q (position())
+        gram = J.dot(J.T)                                # J J^T: its eigenvalues are sigma^2
+        eigenvalues, _, info = syev(gram, compute_v=0)
+        smallest = math.sqrt(max(float(eigenvalues[0]), 0.0)) if info == 0 else 0.0
         damping2 = 0.0
-        if smallest < self.singular_value:
-            damping2 = self.damping ** 2 * (1.0 - (smallest / self.singular_value) ** 2)
-        range_ = Vt[:rows]
-        inverse = (range_.T * (sigma / (sigma * sigma + damping2))) @ U.T          # J#
-        nu = np.empty(rows)
-        a = np.empty(rows)
-        nu[:m] = xd
-        a[:m] = xdd
+        if smallest >= CLEAR * self.singular_value:      # full row rank, undamped: J# = J^T (J J^T)^-1
+            inverse = gesv(J, self._identity)[2] if rows == robot.n else posv(gram, J)[1].T
+            row_space = inverse, J                       # V_r V_r^T = J# J
+        else:                                            # near (or at) a singularity: the full SVD
+            U, sigma, Vt, _ = gesdd(J, compute_uv=1, full_matrices=1)
+            smallest = float(sigma[-1])
+            if smallest < self.singular_value:
+                damping2 = self.damping ** 2 * (1.0 - (smallest / self.singular_value) ** 2)
+            range_ = Vt[:rows]
+            gains = np.multiply(sigma, sigma, out=self._gains)                    # sigma / (sigma^2 + lambda^2)
+            gains += damping2
+            np.divide(sigma, gains, out=gains)
+            inverse = np.dot(np.multiply(range_.T, gains, out=self._scaled), U.T, out=self._inverse)   # J#
+            row_space = range_.T, range_
+        nu, a = self._nu, self._a
+        nu_task, a_task, nu_angular, a_angular = self._task_parts
+        nu_task[:] = xd
+        a_task[:] = xdd
         if self._pose:
             local = self._rotation.T[self._all_orientation]                            # S_o R^T
-            nu[m:] = local @ omega
-            a[m:] = local @ omegad
-        qd = inverse @ nu
+            np.dot(local, omega, out=nu_angular)
+            np.dot(local, omegad, out=a_angular)
+        qd = inverse.dot(nu)
         if rows == robot.n:
-            qdd = inverse @ (a - robot.jdot_qdot(q, qd))
-        else:                                            # N = I - V_r V_r^T: the null space of J
+            qdd = inverse.dot(np.subtract(a, robot.jdot_qdot(q, qd), out=a))
+        else:
+            left, right = row_space                      # N = I - V_r V_r^T: the null space of J
+            null = np.subtract(self._identity, left.dot(right), out=self._null)
+            qd_task = qd
             qd0, slope = self.secondary(q)
-            qd += qd0 - range_.T @ (range_ @ qd0)
+            qd = qd_task + null.dot(qd0)
             derivative = robot.jacobian_derivative(q, qd)
-            qdd = inverse @ (a - derivative @ qd)
+            qdd = inverse.dot(np.subtract(a, derivative.dot(qd), out=a))
             # the null-space part of d/dt (J# nu + N qd_0): N (dJ^T J#^T (J# nu - qd_0) + d qd_0/dt)
-            z = derivative.T @ (inverse.T @ (inverse @ nu - qd0)) + slope * qd
-            qdd += z - range_.T @ (range_ @ z)
-        margins = np.minimum(q - self.lower, self.upper - q)[self._limited]
-        self.report["joint_limit_margin"] = float(margins.min()) if margins.size else NO_LIMIT_MARGIN
-        self.report["smallest_singular_value"] = smallest
+            z = derivative.T.dot(inverse.T.dot(qd_task - qd0))
+            z += slope * qd
+            qdd += null.dot(z)
+        report["joint_limit_margin"] = self._margin
+        report["smallest_singular_value"] = smallest
         status = (NOT_CONVERGED if not self._converged_now else AT_LIMIT if self.at_limit
                   else NEAR_SINGULAR if damping2 > 0.0 else CONVERGED)
-        self.report["status"] = float(status)
-        if not math.isfinite(float(qd.sum() + qdd.sum())):
-            self.report["status"] = float(NOT_CONVERGED)
+        report["status"] = float(status)
+        if not math.isfinite(sum(qd.tolist()) + sum(qdd.tolist())):
+            report["status"] = float(NOT_CONVERGED)
             raise Unreachable(f"the rates are not finite at q = {np.round(q, 6).tolist()}")
         if status != CONVERGED:
             raise Unreachable(self._why(status, q))
@@ -312,3 +393,10 @@ class DampedLeastSquaresIK(IKSolver):
             return f"{held} {where}: the target is reached only on the limit"
         return (f"near a singularity: smallest singular value of the Jacobian "
                 f"{r['smallest_singular_value']:.3g} < singular_value {self.singular_value:g} {where}")
+
+
+def _slice_if_consecutive(rows: list[int]) -> slice | list[int]:
+    """The rows as a slice (indexing by it gives a view) where they are consecutive and ascending."""
+    if rows and rows == list(range(rows[0], rows[0] + len(rows))):
+        return slice(rows[0], rows[0] + len(rows))
+    return rows

@@ -12,6 +12,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from ..orientation import quaternion_of
 from .description import RobotDescription
 
 _DERIVATIVE_SUFFIX = ("", "/s", "/s2")
@@ -104,6 +105,12 @@ class RobotModel(ABC):
     def rotation(self, q: np.ndarray) -> np.ndarray:
         """Orientation of the task frame (frame to world), shape (3, 3): a pose task's robot has it."""
         raise NotImplementedError(f"robot {self.description.name!r} has no task orientation")
+
+    def fk_quaternion(self, q: np.ndarray) -> tuple[list[float], list[float]]:
+        """A pose task's robot: :meth:`fk` and the orientation of :meth:`rotation` as a unit
+        quaternion (x, y, z, w), w >= 0 (:func:`~robofmu.components.orientation.quaternion_of`),
+        at ``q``, as floats (a model may take both from one pass)."""
+        return self.fk(q).tolist(), quaternion_of(self.rotation(q))
 
     def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A pose task's robot: the task frame's position (3,), orientation (3, 3) and full Jacobian

@@ -13,6 +13,7 @@ from xml.etree import ElementTree
 import numpy as np
 import pinocchio as pin
 
+from ..orientation import canonical
 from .description import RobotDescription
 from .model import RobotModel, derivative_unit
 
@@ -136,13 +137,17 @@ class SerialRobot(RobotModel):
             raise ValueError(f"{description.path}: configurations.home: needs {self.n} joint values "
                              f"(the URDF has {self.n} joints), got {len(description.configuration('home'))}")
         self.task_id = self._frame(description.task.frame, "task.frame")
+        self._placement = self.data.oMf[self.task_id]        # a reference (data is never replaced): follows every pass
         self._axes = np.array(description.task.axes)
+        self._task_axes = list(description.task.axes)
         self.m = len(self._axes)
         first = int(self._axes[0])               # the Jacobian's task rows: a slice where consecutive
         consecutive = list(self._axes) == list(range(first, first + self.m))
         self._rows = slice(first, first + self.m) if consecutive else self._axes
         self.orientation_axes = tuple(description.task.orientation_axes)
         self._orientation_rows = list(self.orientation_axes)
+        # a pose task tracking every axis: its rows are the full 6 x n Jacobian's, in order
+        self._full_pose = consecutive and first == 0 and self.m == 3 and self._orientation_rows == [0, 1, 2]
         self._direction = np.array(description.gravity_direction)
         self.set_gravity(description.gravity if gravity is None else gravity)
         self.payload = 0.0
@@ -232,6 +237,11 @@ class SerialRobot(RobotModel):
         pin.forwardKinematics(self.model, self.data, q)
         return pin.updateFramePlacement(self.model, self.data, self.task_id).rotation.copy()
 
+    def fk_quaternion(self, q: np.ndarray) -> tuple[list[float], list[float]]:
+        pin.forwardKinematics(self.model, self.data, q)
+        pose = pin.SE3ToXYZQUAT(pin.updateFramePlacement(self.model, self.data, self.task_id)).tolist()
+        return [pose[axis] for axis in self._task_axes], canonical(pose[3:])    # (x, y, z, qx, qy, qz, qw)
+
     def pose(self, q: np.ndarray) -> pin.SE3:
         """The task frame's placement (frame to world) at ``q``: a new ``pinocchio.SE3``."""
         pin.forwardKinematics(self.model, self.data, q)
@@ -242,9 +252,9 @@ class SerialRobot(RobotModel):
         (6, n): rows world linear velocity, then angular velocity about the frame's own axes.
         New arrays, from one pass of Pinocchio's kinematics."""
         J = pin.computeFrameJacobian(self.model, self.data, q, self.task_id, pin.LOCAL_WORLD_ALIGNED)
-        placement = self.data.oMf[self.task_id]
+        placement = self._placement
         rotation = placement.rotation.copy()
-        J[3:] = rotation.T @ J[3:]
+        J[3:] = rotation.T.dot(J[3:])
         return placement.translation.copy(), rotation, J
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
@@ -254,31 +264,37 @@ class SerialRobot(RobotModel):
         full = self.kinematics(q)[2]                          # angular rows about the frame's own axes
         return np.vstack([full[self._rows], full[3:][self._orientation_rows]])
 
+    def _pose_rows(self, world: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """A pose task's rows: the task axes of ``world``'s linear part (world-aligned), then the
+        tracked axes of ``local``'s angular part (about the frame's own axes); both stacked as
+        Pinocchio's 6-row [linear; angular]. ``world`` itself where every row is tracked."""
+        if self._full_pose:
+            world[3:] = local[3:]
+            return world
+        return np.concatenate([world[self._rows], local[3:][self._orientation_rows]])
+
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        pin.forwardKinematics(self.model, self.data, q, qd, self._zero)
-        acceleration = pin.getFrameClassicalAcceleration(self.model, self.data, self.task_id,
-                                                         pin.LOCAL_WORLD_ALIGNED)
+        model, data, frame = self.model, self.data, self.task_id
+        pin.forwardKinematics(model, data, q, qd, self._zero)
+        acceleration = pin.getFrameClassicalAcceleration(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
         if not self.orientation_axes:
             return acceleration.linear[self._rows]
-        # d/dt (R^T omega) = R^T omega_dot (the term dR^T/dt omega = -R^T (omega x omega) vanishes)
-        rotation = pin.updateFramePlacement(self.model, self.data, self.task_id).rotation
-        return np.concatenate([acceleration.linear[self._rows],
-                               (rotation.T @ acceleration.angular)[self._orientation_rows]])
+        # d/dt (R^T omega) = R^T omega_dot (the term dR^T/dt omega = -R^T (omega x omega) vanishes):
+        # the angular part of the classical acceleration in the frame's own axes (LOCAL)
+        local = pin.getFrameClassicalAcceleration(model, data, frame, pin.LOCAL)
+        return self._pose_rows(acceleration.vector, local.vector)
 
     def jacobian_derivative(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """dJ/dt (task_rows, n) of :meth:`jacobian` along the motion (q, qd): Pinocchio's frame
-        Jacobian time variation (world-aligned), and for the angular rows about the frame's own
-        axes d(R^T J_w)/dt = R^T (dJ_w/dt - [omega]x J_w). A new array."""
+        Jacobian time variation, world-aligned for the position rows and in the frame's own axes
+        (LOCAL, the derivative of R^T J_w: R^T (dJ_w/dt - [omega]x J_w)) for the angular rows.
+        A new array."""
         model, data, frame = self.model, self.data, self.task_id
         pin.computeJointJacobiansTimeVariation(model, data, q, qd)
-        pin.updateFramePlacement(model, data, frame)
         derivative = pin.getFrameJacobianTimeVariation(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
         if not self.orientation_axes:
             return derivative[self._rows]
-        J = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
-        omega = J[3:] @ qd
-        angular = data.oMf[frame].rotation.T @ (derivative[3:] - pin.skew(omega) @ J[3:])
-        return np.vstack([derivative[self._rows], angular[self._orientation_rows]])
+        return self._pose_rows(derivative, pin.getFrameJacobianTimeVariation(model, data, frame, pin.LOCAL))
 
     # -- dynamics ---------------------------------------------------------------------------
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:

@@ -137,7 +137,6 @@ class SerialRobot(RobotModel):
             raise ValueError(f"{description.path}: configurations.home: needs {self.n} joint values "
                              f"(the URDF has {self.n} joints), got {len(description.configuration('home'))}")
         self.task_id = self._frame(description.task.frame, "task.frame")
-        self._placement = self.data.oMf[self.task_id]        # a reference (data is never replaced): follows every pass
         self._axes = np.array(description.task.axes)
         self._task_axes = list(description.task.axes)
         self.m = len(self._axes)
@@ -252,7 +251,7 @@ class SerialRobot(RobotModel):
         (6, n): rows world linear velocity, then angular velocity about the frame's own axes.
         New arrays, from one pass of Pinocchio's kinematics."""
         J = pin.computeFrameJacobian(self.model, self.data, q, self.task_id, pin.LOCAL_WORLD_ALIGNED)
-        placement = self._placement
+        placement = self.data.oMf[self.task_id]
         rotation = placement.rotation.copy()
         J[3:] = rotation.T.dot(J[3:])
         return placement.translation.copy(), rotation, J

@@ -68,6 +68,20 @@ def test_ur5_case_quarter_turn_about_the_tool_axis():
     np.testing.assert_allclose(omega, [0.0, 0.0, -0.75 * math.pi / 2], atol=1e-15)
 
 
+def assert_rates_match_central_differences(profile, t: float, h: float) -> None:
+    """The profile's velocity, acceleration, angular velocity and acceleration at ``t`` against
+    central differences of its position, velocity, orientation and angular velocity (step ``h``),
+    to 1e-8 (see test_rates_match_finite_differences)."""
+    _, xd, xdd, _, omega, omegad = profile.evaluate(t, snap=False)
+    x_p, xd_p, _, q_p, w_p, _ = profile.evaluate(t + h, snap=False)
+    x_m, xd_m, _, q_m, w_m, _ = profile.evaluate(t - h, snap=False)
+    np.testing.assert_allclose((x_p - x_m) / (2 * h), xd, rtol=0, atol=1e-8)
+    np.testing.assert_allclose((xd_p - xd_m) / (2 * h), xdd, rtol=0, atol=1e-8)
+    world = (Rotation.from_quat(q_p) * Rotation.from_quat(q_m).inv()).as_rotvec() / (2 * h)
+    np.testing.assert_allclose(world, omega, rtol=0, atol=1e-8)
+    np.testing.assert_allclose((w_p - w_m) / (2 * h), omegad, rtol=0, atol=1e-8)
+
+
 @pytest.mark.parametrize("case, cruise", CASES, ids=IDS)
 def test_rates_match_finite_differences(case, cruise):
     # Within one LSPB piece s(t) is a quadratic, so p, s' d, R0 Exp(s r) composed as
@@ -79,14 +93,7 @@ def test_rates_match_finite_differences(case, cruise):
     ts = [t for t in np.linspace(0.0, T, 97)[1:-1] if np.min(np.abs(line.breakpoints - t)) > 2 * h]
     assert len(ts) > 80
     for t in ts:
-        x_p, xd_p, _, q_p, w_p, _ = line.evaluate(t + h, snap=False)
-        x_m, xd_m, _, q_m, w_m, _ = line.evaluate(t - h, snap=False)
-        _, xd, xdd, _, omega, omegad = line.evaluate(t, snap=False)
-        np.testing.assert_allclose((x_p - x_m) / (2 * h), xd, rtol=0, atol=1e-8)
-        np.testing.assert_allclose((xd_p - xd_m) / (2 * h), xdd, rtol=0, atol=1e-8)
-        world = (Rotation.from_quat(q_p) * Rotation.from_quat(q_m).inv()).as_rotvec() / (2 * h)
-        np.testing.assert_allclose(world, omega, rtol=0, atol=1e-8)
-        np.testing.assert_allclose((w_p - w_m) / (2 * h), omegad, rtol=0, atol=1e-8)
+        assert_rates_match_central_differences(line, t, h)
 
 
 @pytest.mark.parametrize("case, cruise", CASES, ids=IDS)
@@ -231,17 +238,11 @@ def test_minimum_time_move_is_a_slerp_and_its_rates_match_finite_differences(lim
     for t in np.linspace(0.0, line.duration, 61)[1:-1]:
         if np.min(np.abs(line.breakpoints - t)) < 2 * h:
             continue
-        x, xd, xdd, q, omega, omegad = line.evaluate(t, snap=False)
+        x, _, _, q, _, _ = line.evaluate(t, snap=False)
         s = float(np.dot(x - LIMITED["start"], d) / np.dot(d, d))     # the position says where on the line
         np.testing.assert_allclose(x, np.asarray(LIMITED["start"]) + s * d, rtol=0, atol=1e-15)
         assert angle_between(q, slerp([s]).as_quat()[0]) < 1e-12
-        x_p, xd_p, _, q_p, w_p, _ = line.evaluate(t + h, snap=False)
-        x_m, xd_m, _, q_m, w_m, _ = line.evaluate(t - h, snap=False)
-        np.testing.assert_allclose((x_p - x_m) / (2 * h), xd, rtol=0, atol=1e-8)
-        np.testing.assert_allclose((xd_p - xd_m) / (2 * h), xdd, rtol=0, atol=1e-8)
-        world = (Rotation.from_quat(q_p) * Rotation.from_quat(q_m).inv()).as_rotvec() / (2 * h)
-        np.testing.assert_allclose(world, omega, rtol=0, atol=1e-8)
-        np.testing.assert_allclose((w_p - w_m) / (2 * h), omegad, rtol=0, atol=1e-8)
+        assert_rates_match_central_differences(line, t, h)
 
 
 def test_a_pure_rotation_or_pure_translation_at_minimum_time():
@@ -316,14 +317,7 @@ def test_waypoint_rates_match_finite_differences_and_the_quaternion_never_flips(
     for t in times[::5]:
         if np.min(np.abs(profile.breakpoints - t)) < 2 * h:
             continue
-        _, xd, xdd, _, omega, omegad = profile.evaluate(t, snap=False)
-        x_p, xd_p, _, q_p, w_p, _ = profile.evaluate(t + h, snap=False)
-        x_m, xd_m, _, q_m, w_m, _ = profile.evaluate(t - h, snap=False)
-        np.testing.assert_allclose((x_p - x_m) / (2 * h), xd, rtol=0, atol=1e-8)
-        np.testing.assert_allclose((xd_p - xd_m) / (2 * h), xdd, rtol=0, atol=1e-8)
-        world = (Rotation.from_quat(q_p) * Rotation.from_quat(q_m).inv()).as_rotvec() / (2 * h)
-        np.testing.assert_allclose(world, omega, rtol=0, atol=1e-8)
-        np.testing.assert_allclose((w_p - w_m) / (2 * h), omegad, rtol=0, atol=1e-8)
+        assert_rates_match_central_differences(profile, t, h)
         checked += 1
     assert checked > 250
 

@@ -116,7 +116,6 @@ class PoseLine(_PoseProfile):
                              f"rotation to the same end orientation, angle <= pi{hint}")
         limits = {"v_max": v_max, "a_max": a_max, "omega_max": omega_max, "alpha_max": alpha_max}
         self.cruise_factor = float(cruise_factor)
-        self.limits = None
         if duration is not None:
             given = [k for k, v in limits.items() if v is not None]
             if given:
@@ -124,7 +123,7 @@ class PoseLine(_PoseProfile):
                                  f"(minimum time), not both: got duration and {', '.join(given)}")
             self.time_law = LSPBLaw(duration, cruise_factor)
         else:
-            self.time_law = self._minimum_time({k: v for k, v in limits.items()})
+            self.time_law = self._minimum_time(limits)
         self.duration = self.time_law.duration
         self.breakpoints = self.time_law.breakpoints
         self._break_list = self.breakpoints.tolist()
@@ -151,7 +150,6 @@ class PoseLine(_PoseProfile):
             raise ValueError(f"give duration (an LSPB time law) or all four limits {', '.join(LIMITS)} "
                              f"(minimum time); missing: {', '.join(missing)}")
         bounds = {k: _positive(v, k, LIMITS[k]) for k, v in limits.items()}
-        self.limits = bounds
         distance = float(np.linalg.norm(self.displacement))
         if distance == 0.0 and self.angle == 0.0:
             raise ValueError("displacement and rotation are both zero: a move at minimum time needs something "

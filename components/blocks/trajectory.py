@@ -352,11 +352,11 @@ class PoseLineBlock(_PoseReference):
             if not isinstance(value, list) or len(value) != length:
                 self.table_error("trajectory", key, f"needs {length} values, got {value!r}")
             given[f"_{key}"] = value
-        self.at_limits = any(p.name in given for p in self.limits)
-        if self.at_limits and "duration" in given:
+        at_limits = any(p.name in given for p in self.limits)
+        if at_limits and "duration" in given:
             self.table_error("trajectory", "duration", "give either duration (an LSPB time law) or the limits "
                              f"{', '.join(p.name for p in self.limits)} (minimum time), not both")
-        self.scalars = self.limits if self.at_limits else self.lspb
+        self.scalars = self.limits if at_limits else self.lspb
         values = self.table_values("trajectory", self.scalars,
                                    {k: v for k, v in given.items() if not k.startswith("_")})
         axis = lambda i: "xyz"[i - 1]

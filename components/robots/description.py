@@ -12,7 +12,11 @@ Schema (every table but those marked optional is required)::
     urdf = "rrp.urdf"                    # relative to the TOML, or a file of an installed
                                          # distribution: { distribution = "example-robot-data",
                                          # path = "ur_description/urdf/ur5_robot.urdf" } (the one
-                                         # file of that distribution whose path ends so)
+                                         # file of that distribution whose path ends so);
+                                         # a ".xacro" file is expanded by the xacro package
+    xacro_args = { prefix = "arm_" }     # optional, only for a .xacro urdf: its <xacro:arg>s
+    srdf = "arm.srdf"                    # optional: an SRDF (or { distribution, path }) whose
+                                         # group_states configurations may name
     blocks = ["trajectory", "ik", "controller", "plant", "fk"]
     default_gains = "pd"                 # the controller's start values: one of the [gains.*] sets
 
@@ -25,6 +29,10 @@ Schema (every table but those marked optional is required)::
 
     [joints]                             # optional
     locked = { finger = 0.02 }           # joints held at a value (rad, m), removed from the model
+    chain = ["base_link", "tool_link"]   # optional: one chain of a larger robot; every joint off
+                                         # it is locked (at `locked`, else the SRDF state `home`
+                                         # names, else 0 clipped into its limits), floating and
+                                         # planar joints dropped, mimic followers with their leader
     saturate_effort = false              # the controller clips tau to the effort limits
     [joints.limits.elbow]                # a joint's limits where the URDF has none (or others):
     lower = -2.0                         # rad or m; upper too; velocity (rad/s, m/s); effort
@@ -32,7 +40,9 @@ Schema (every table but those marked optional is required)::
                                          # limits are [0, 0] (its <limit> gives none) is unlimited
 
     [configurations]
-    home = [0.0, 0.0, 0.125]             # joint positions (rad, m); `home` is required
+    home = [0.0, 0.0, 0.125]             # joint positions (rad, m); `home` is required; any
+                                         # configuration may be "srdf:<group_state>" (joints the
+                                         # state does not name: 0 clipped into their limits)
 
     [gravity]                            # optional
     magnitude = 9.81                     # m/s^2
@@ -237,6 +247,18 @@ class RobotDescription:
         IK solver and its parameters; None for robots without an IK block.
     locked : dict of str to float
         Joints of the URDF held at a value (rad, m) and removed from the model (``[joints] locked``).
+    xacro_args : dict of str to str
+        The arguments of a ``.xacro`` URDF (empty for a plain URDF, and for the expanded copy an
+        FMU carries).
+    srdf : Path or None
+        The SRDF whose ``group_state`` s configurations may name (``srdf``).
+    states : dict of str to dict of str to float
+        The SRDF's states: name -> {joint: value (rad, m)} (:func:`~.urdf.srdf_states`).
+    srdf_configurations : dict of str to str
+        The configurations given as ``"srdf:<state>"``: configuration -> state (resolved into
+        ``configurations`` in the model's joint order).
+    chain : tuple of 2 str or None
+        ``[joints] chain``: the base and tip links of the one chain the model keeps.
     tables : tuple of str
         The CSV tables the profiles read (a profile parameter given as ``"file.csv"``), as paths
         relative to the TOML: robot data, carried by each FMU beside the TOML.
@@ -272,6 +294,16 @@ class RobotDescription:
     tables: tuple[str, ...] = ()
     joint_limits: dict[str, dict[str, float]] = field(default_factory=dict)
     saturate_effort: bool = False
+    xacro_args: dict[str, str] = field(default_factory=dict)
+    srdf: Path | None = None
+    states: dict[str, dict[str, float]] = field(default_factory=dict)
+    srdf_configurations: dict[str, str] = field(default_factory=dict)
+    chain: tuple[str, str] | None = None
+
+    @property
+    def home_state(self) -> dict[str, float]:
+        """The SRDF state ``home`` names ({joint: value}), empty if home is given as numbers."""
+        return self.states.get(self.srdf_configurations.get("home", ""), {})
 
     @property
     def model_kind(self) -> str:
@@ -432,8 +464,8 @@ def _choice(table: _Table, selector: str) -> Choice:
     return Choice(kind, {k: v for k, v in table.data.items() if k != selector})
 
 
-def _distribution_file(table: _Table, reference: "_Table") -> Path:
-    """The one file of an installed distribution whose path ends with ``path``."""
+def _distribution_file(table: _Table, reference: "_Table", key: str = "urdf") -> Path:
+    """The one file of an installed distribution whose path ends with ``path`` (for ``key``)."""
     from importlib import metadata
 
     reference.unknown({"distribution", "path"})
@@ -441,11 +473,11 @@ def _distribution_file(table: _Table, reference: "_Table") -> Path:
     try:
         distribution = metadata.distribution(name)
     except metadata.PackageNotFoundError:
-        table.fail("urdf", f"the distribution {name!r} is not installed (pip install {name})")
+        table.fail(key, f"the distribution {name!r} is not installed (pip install {name})")
     suffix = "/" + tail.strip("/")
     found = [f for f in distribution.files or () if ("/" + str(f)).endswith(suffix)]
     if len(found) != 1:
-        table.fail("urdf", f"the distribution {name!r} has {len(found)} files whose path ends with {tail!r}"
+        table.fail(key, f"the distribution {name!r} has {len(found)} files whose path ends with {tail!r}"
                            + (f": {', '.join(map(str, found[:5]))}" if found else "") + "; exactly one is needed")
     return Path(distribution.locate_file(found[0]))
 
@@ -463,7 +495,50 @@ def _urdf(top: _Table, path: Path, urdf: Path | None) -> Path:
     return urdf
 
 
-def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
+def _srdf(top: _Table, path: Path, srdf: Path | None) -> Path | None:
+    """The SRDF file the description names (``srdf``; given: the caller's copy of it), or None."""
+    if "srdf" not in top.data:
+        return None
+    if srdf is None:
+        srdf = (_distribution_file(top, top.table("srdf", _REQUIRED), "srdf") if isinstance(top.data["srdf"], dict)
+                else path.parent / top.string("srdf", _REQUIRED))
+    if not Path(srdf).is_file():
+        top.fail("srdf", f"no such file {srdf}")
+    return Path(srdf)
+
+
+def _named_urdf(top: _Table) -> str:
+    """The file name the ``urdf`` key gives (its ``path`` for a distribution's file)."""
+    value = top.data.get("urdf")
+    return str(value.get("path", "")) if isinstance(value, dict) else str(value or "")
+
+
+def _resolve_states(description: RobotDescription) -> RobotDescription:
+    """``description`` with each ``"srdf:<state>"`` configuration resolved to joint values in the
+    model's joint order (joints the state does not name: 0 clipped into their limits)."""
+    from .serial import reduced_model          # the model's joint order is Pinocchio's
+
+    model, urdf = reduced_model(description)
+    joints = [j for j in range(1, model.njoints) if model.joints[j].nv == 1]
+    configurations = dict(description.configurations)
+    for name, state in description.srdf_configurations.items():
+        key = f"configurations.{name}"
+        if state not in description.states:
+            raise DescriptionError(description.path, key, f"no group_state {state!r} in {description.srdf} (its "
+                                                          f"states: {', '.join(description.states)})")
+        values = description.states[state]
+        unknown = [joint for joint in values if joint not in urdf.joints]
+        if unknown:
+            raise DescriptionError(description.path, key, f"the SRDF state {state!r} names joint {unknown[0]!r}, "
+                                                          f"which {urdf.path.name} lacks: use the robot's SRDF")
+        configurations[name] = tuple(
+            float(values[model.names[j]]) if model.names[j] in values else
+            min(max(0.0, float(model.lowerPositionLimit[model.joints[j].idx_q])),
+                float(model.upperPositionLimit[model.joints[j].idx_q])) for j in joints)
+    return replace(description, configurations=configurations)
+
+
+def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | None = None) -> RobotDescription:
     """Read and validate one description file.
 
     Parameters
@@ -472,7 +547,11 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
         The TOML file.
     urdf : str or Path, optional
         A copy of the URDF to read instead of the one the ``urdf`` key names (an FMU carries its
-        robot's URDF in its own resources).
+        robot's URDF in its own resources; a xacro robot's expanded, so ``xacro_args`` are
+        not applied to it).
+    srdf : str or Path, optional
+        A copy of the SRDF to read instead of the one the ``srdf`` key names; with ``urdf`` and
+        no ``srdf``, the file beside that copy with the suffix ``.srdf`` (how a FMU carries it).
 
     Raises
     ------
@@ -488,17 +567,34 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
         raise DescriptionError(path, "(syntax)", str(exc)) from None
     top = _Table(path, data)
     top.unknown({"name", "summary", "urdf", "mechanism", "blocks", "task", "configurations", "gravity",
-                 "payload", "gains", "default_gains", "trajectory", "trajectories", "ik", "joints"})
+                 "payload", "gains", "default_gains", "trajectory", "trajectories", "ik", "joints", "xacro_args",
+                 "srdf"})
+    copy = urdf is not None
+    if copy and srdf is None:
+        srdf = Path(urdf).with_suffix(".srdf")
     name = top.string("name", _REQUIRED)
     if name != path.stem:
         top.fail("name", f"must be the file's name {path.stem!r}, got {name!r}")
     mechanism = None
     mech = top.table("mechanism", None)
+    xacro_args = {}
     if mech is None:
         urdf = _urdf(top, path, urdf)
+        arguments = top.table("xacro_args", None)
+        if arguments is not None:
+            if not _named_urdf(top).endswith(".xacro"):
+                top.fail("xacro_args", f"only for a .xacro urdf, and {_named_urdf(top)!r} is none: drop them")
+            for key, value in arguments.data.items():
+                if isinstance(value, (dict, list)):
+                    arguments.fail(key, f"must be a string or a number, got {value!r}")
+            xacro_args = {} if copy else {key: str(value).lower() if isinstance(value, bool) else str(value)
+                                          for key, value in arguments.data.items()}
     else:
         if "urdf" in data:
             top.fail("mechanism", "a robot has either a `urdf` or a [mechanism] table, not both")
+        for key in ("xacro_args", "srdf"):
+            if key in data:
+                top.fail(key, "only for a robot with a `urdf`")
         urdf = None
         kind = mech.string("kind", _REQUIRED)
         if kind not in MECHANISMS:
@@ -526,12 +622,29 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
         coordinates = task.strings("coordinates", _REQUIRED)
         task_space = TaskSpace(task.string("frame", "end_effector"), coordinates, (0, 1, 2)[:len(coordinates)])
 
+    srdf = None if urdf is None else _srdf(top, path, srdf)
+    states = {}
+    if srdf is not None:
+        from .urdf import UrdfError, srdf_states
+        try:
+            states = srdf_states(srdf)
+        except UrdfError as exc:
+            if copy:
+                raise
+            top.fail("srdf", str(exc))
     conf = top.table("configurations", _REQUIRED)
-    configurations = {k: conf.numbers(k, _REQUIRED) for k in conf.data}
-    if "home" not in configurations:
+    named_states = {k: v[len(SRDF_PREFIX):] for k, v in conf.data.items()
+                    if isinstance(v, str) and v.startswith(SRDF_PREFIX)}
+    for k, v in named_states.items():
+        if not v:
+            conf.fail(k, f"names no SRDF state: give \"{SRDF_PREFIX}<group_state>\"")
+        if srdf is None:
+            conf.fail(k, f"names an SRDF state, {SRDF_PREFIX + v!r}, but the robot has no `srdf` file")
+    configurations = {k: conf.numbers(k, _REQUIRED) for k in conf.data if k not in named_states}
+    if "home" not in conf.data:
         conf.fail("home", "missing")
     lengths = {len(v) for v in configurations.values()}
-    if len(lengths) != 1:
+    if len(lengths) > 1:
         conf.fail("home", f"every configuration needs the same number of joints, got {sorted(lengths)}")
 
     grav = top.table("gravity", {})
@@ -583,12 +696,16 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
     if ("ik" in blocks) != (ik is not None):
         top.fail("ik", "an [ik] table is needed exactly when `blocks` lists 'ik'")
 
-    locked, limits, saturate = {}, {}, False
+    locked, limits, saturate, chain = {}, {}, False, None
     joints = top.table("joints", None)
     if joints is not None:
         if mechanism is not None:
             top.fail("joints", "a [mechanism] describes its joints in its own table")
-        joints.unknown({"locked", "limits", "saturate_effort"})
+        joints.unknown({"locked", "limits", "saturate_effort", "chain"})
+        if "chain" in joints.data:
+            chain = joints.strings("chain", _REQUIRED)
+            if len(chain) != 2:
+                joints.fail("chain", f"must be two link names [base, tip], got {list(chain)}")
         held = joints.table("locked", {})
         locked = {joint: held.number(joint, _REQUIRED) for joint in held.data}
         given = joints.table("limits", {})
@@ -615,13 +732,25 @@ def read(path: str | Path, urdf: str | Path | None = None) -> RobotDescription:
                                                                    f"its path relative to the TOML, got {value!r}")
                 tables.append(value)
 
-    return RobotDescription(
+    description = RobotDescription(
         name=name, summary=top.string("summary", _REQUIRED), path=path, urdf=urdf, blocks=blocks,
         task=task_space, configurations=configurations, gravity=magnitude,
         gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
         trajectory=trajectory, ik=ik,
         mechanism=mechanism, locked=locked, profiles=profiles, tables=tuple(dict.fromkeys(tables)),
-        joint_limits=limits, saturate_effort=saturate)
+        joint_limits=limits, saturate_effort=saturate, xacro_args=xacro_args, srdf=srdf, states=states,
+        srdf_configurations=named_states, chain=chain)
+    if not named_states:
+        return description
+    description = _resolve_states(description)
+    if len({len(v) for v in description.configurations.values()}) != 1:
+        conf.fail("home", "every configuration needs as many joint values as the model has joints, got "
+                          f"{sorted({len(v) for v in description.configurations.values()})}")
+    return description
+
+
+#: A configuration given as ``"srdf:<state>"`` is the SRDF's group_state of that name.
+SRDF_PREFIX = "srdf:"
 
 
 #: The keys of a ``[joints.limits.<joint>]`` table.

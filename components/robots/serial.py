@@ -7,95 +7,161 @@ fixed at their values). Task coordinates are the chosen world axes of the task f
 """
 from __future__ import annotations
 
+import contextlib
 import math
-from xml.etree import ElementTree
+import os
+import sys
+import tempfile
+from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
 
 from ..orientation import canonical
-from .description import RobotDescription
+from .description import DescriptionError, RobotDescription
 from .model import RobotModel, derivative_unit
+from .urdf import MOVABLE, Urdf, UrdfError, read_urdf
 
 
-_CONTINUOUS = "continuous (Pinocchio's q = (cos, sin))"
-#: What a joint that robofmu does not take is, by a word of Pinocchio's joint model name
-#: (``JointModelRUBZ``, ``JointModelRevoluteUnboundedUnaligned``, ``JointModelSpherical``, ...).
-_JOINT_KINDS = {"RUB": _CONTINUOUS, "Unbounded": _CONTINUOUS, "Spherical": "spherical", "FreeFlyer": "floating",
-                "Planar": "planar", "Translation": "a translation", "Composite": "composite"}
+#: What a joint that robofmu does not take is, by a word of Pinocchio's joint model name.
+_JOINT_KINDS = {"Spherical": "spherical", "FreeFlyer": "floating", "Planar": "planar",
+                "Translation": "a translation", "Composite": "composite"}
 
 
-def _urdf_model(description: RobotDescription) -> pin.Model:
-    """Pinocchio's model of the description's URDF file.
+@lru_cache(maxsize=32)
+def _read(path: str, version: tuple[int, int], xacro_args: tuple[tuple[str, str], ...]) -> Urdf:
+    del version
+    return read_urdf(path, dict(xacro_args) or None)
 
-    A ``continuous`` joint is read as an unbounded revolute joint (q an angle, not Pinocchio's
-    (cos, sin) pair): its type becomes ``revolute`` with position limits [0, 0], which
-    :func:`_set_limits` reads as none; its effort and velocity limits stay. A joint that mimics
-    another (``<mimic>``) moves with it (Pinocchio's mimic joint: no coordinate of its own) unless
-    the description locks it; a mimic joint whose leader is locked must be locked too."""
-    urdf = description.urdf
-    text = urdf.read_text()
-    root = ElementTree.fromstring(text)
-    followers = {joint.get("name"): joint.find("mimic").get("joint") for joint in root.iter("joint")
-                 if joint.find("mimic") is not None}
+
+def robot_urdf(description: RobotDescription) -> Urdf:
+    """The description's URDF, read and checked (:func:`~.urdf.read_urdf`; a ``.xacro`` file
+    expanded with its ``xacro_args``); cached per file and its modification time."""
+    stat = description.urdf.stat()
+    return _read(str(description.urdf), (stat.st_mtime_ns, stat.st_size), tuple(sorted(description.xacro_args.items())))
+
+
+@contextlib.contextmanager
+def _stderr_to(sink):
+    """File descriptor 2 sent to ``sink`` (a file) meanwhile: urdfdom prints its errors there."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    os.dup2(sink.fileno(), 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _parse(urdf: Urdf, text: str, mimic: bool) -> pin.Model:
+    """Pinocchio's model of ``text`` (from ``urdf``), urdfdom's lines on stderr kept to the message."""
+    with tempfile.TemporaryFile(mode="w+") as sink:
+        try:
+            with _stderr_to(sink):
+                return pin.buildModelFromXML(text, mimic)
+        except (ValueError, RuntimeError) as exc:
+            sink.seek(0)
+            said = " ".join(line.strip() for line in sink if line.strip() and not line.strip().startswith("at line"))
+            raise UrdfError(urdf.path, "urdfdom", f"Pinocchio's URDF parser refuses it: {said or exc}",
+                            "fix the URDF") from None
+
+
+def lock_values(description: RobotDescription, urdf: Urdf) -> dict[str, float | None]:
+    """The joints the description removes from the model, each with its value (rad, m; None: a
+    floating or planar joint, held at Pinocchio's neutral placement).
+
+    ``[joints] locked`` first; then, with ``[joints] chain = [base, tip]``, every joint off the
+    chain from link ``base`` to link ``tip`` (above ``base`` too): at its ``locked`` value, else
+    at the value of the SRDF state ``home`` uses, else at 0 clipped into its limits; a mimic
+    follower with its leader (q = multiplier q_leader + offset), else it stays a mimic joint."""
+    locked: dict[str, float | None] = dict(description.locked)
+    for joint in locked:
+        if joint not in urdf.joints:
+            raise ValueError(f"{description.path}: joints.locked.{joint}: no joint {joint!r} in {urdf.path.name} "
+                             f"(its joints: {', '.join(urdf.joints)})")
+    if description.chain is None:
+        return locked
+    base, tip = description.chain
+    try:
+        on = {joint.name for joint in urdf.chain(base, tip)}
+    except UrdfError as exc:
+        raise DescriptionError(description.path, "joints.chain", str(exc)) from None
+    for name in on:
+        joint = urdf.joints[name]
+        if joint.type in ("floating", "planar"):
+            raise DescriptionError(description.path, "joints.chain", f"joint {name!r} on the chain from {base!r} to "
+                                                                    f"{tip!r} is {joint.type}: start the chain below it")
+    state = description.home_state
+    for joint in urdf.joints.values():
+        if joint.name in on or joint.name in locked or joint.mimic is not None:
+            continue
+        if joint.type in ("floating", "planar"):
+            locked[joint.name] = None
+        elif joint.type in MOVABLE:
+            locked[joint.name] = joint.clip(state.get(joint.name, 0.0))
+    for joint in urdf.joints.values():
+        if joint.mimic is not None and joint.name not in on and joint.mimic in locked and joint.name not in locked:
+            leader = locked[joint.mimic]
+            locked[joint.name] = joint.clip(joint.multiplier * leader + joint.offset)
+    return locked
+
+
+def _urdf_model(description: RobotDescription, urdf: Urdf, locked: dict[str, float | None]) -> pin.Model:
+    """Pinocchio's model of the description's checked URDF (:attr:`Urdf.text`: a ``continuous``
+    joint an unbounded revolute one, one angle).
+
+    A joint that mimics another (``<mimic>``) moves with it (Pinocchio's mimic joint: no
+    coordinate of its own) unless it is locked; a mimic joint whose leader is locked must be
+    locked too."""
+    followers = {joint.name: joint.mimic for joint in urdf.joints.values() if joint.mimic is not None}
     for follower, leader in followers.items():
-        if leader in description.locked and follower not in description.locked:
+        if leader in locked and follower not in locked:
             raise ValueError(f"{description.path}: joints.locked: joint {follower!r} mimics the locked joint "
                              f"{leader!r}: lock it too")
-    mimic = any(follower not in description.locked for follower in followers)
-    if 'type="continuous"' not in text and "type='continuous'" not in text:
-        return pin.buildModelFromUrdf(str(urdf), mimic)
-    for joint in root.iter("joint"):
-        if joint.get("type") == "continuous":
-            joint.set("type", "revolute")
-            limit = joint.find("limit")
-            if limit is None:
-                limit = ElementTree.SubElement(joint, "limit", effort="0", velocity="0")
-            limit.set("lower", "0")
-            limit.set("upper", "0")
-    return pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode"), mimic)
+    free = [follower for follower in followers if follower not in locked]
+    if free and len(free) < len(followers):          # locked followers become plain joints, then locked
+        return _parse(urdf, urdf.xml(drop_mimic=[f for f in followers if f in locked]), True)
+    return _parse(urdf, urdf.text, bool(free))
 
 
-def _locked(model: pin.Model, description: RobotDescription) -> pin.Model:
-    """The model without the joints the description locks, each fixed at its value (Pinocchio's
-    reduced model); the model itself if it locks none."""
-    if not description.locked:
+def _locked(model: pin.Model, description: RobotDescription, urdf: Urdf, locked: dict[str, float | None]) -> pin.Model:
+    """The model without the locked joints, each fixed at its value (Pinocchio's reduced model);
+    the model itself if it locks none."""
+    if not locked:
         return model
     reference = pin.neutral(model)
     ids = []
-    for joint, value in description.locked.items():
-        key = f"joints.locked.{joint}"
-        if not model.existJointName(joint):
-            raise ValueError(f"{description.path}: {key}: no joint {joint!r} in {description.urdf.name} "
-                             f"(its joints: {', '.join(model.names[1:])})")
+    for joint, value in locked.items():
+        key = f"joints.locked.{joint}" if joint in description.locked else "joints.chain"
         j = model.getJointId(joint)
-        if model.joints[j].nq != 1:
-            raise ValueError(f"{description.path}: {key}: only a revolute or prismatic joint can be locked")
-        k = model.joints[j].idx_q
-        low, high = model.lowerPositionLimit[k], model.upperPositionLimit[k]
-        if not low <= value <= high:
-            raise ValueError(f"{description.path}: {key}: {value:g} lies outside the joint's limits "
-                             f"[{low:g}, {high:g}]")
-        reference[k] = value
+        if value is not None:
+            if model.joints[j].nq != 1:
+                raise ValueError(f"{description.path}: {key}: only a revolute or prismatic joint can be locked")
+            low, high = urdf.joints[joint].lower, urdf.joints[joint].upper
+            if not low <= value <= high:
+                raise ValueError(f"{description.path}: {key}: {value:g} lies outside the joint's limits "
+                                 f"[{low:g}, {high:g}]")
+            reference[model.joints[j].idx_q] = value
         ids.append(j)
     return pin.buildReducedModel(model, ids, reference)
 
 
-def _set_limits(model: pin.Model, description: RobotDescription) -> None:
-    """The joint limits as data: the URDF's, a joint whose position limits are [0, 0] (its
-    <limit> names none) unlimited, a velocity or effort limit of 0 none, and the description's
-    ``[joints.limits.<joint>]`` over them."""
+def _set_limits(model: pin.Model, description: RobotDescription, urdf: Urdf) -> None:
+    """The joint limits as data: the checked URDF's (:class:`~.urdf.UrdfJoint`: none where it
+    gives none), the description's ``[joints.limits.<joint>]`` over them."""
     fields = {"lower": "lowerPositionLimit", "upper": "upperPositionLimit", "velocity": "velocityLimit",
               "effort": "effortLimit"}
     arrays = {key: getattr(model, name).copy() for key, name in fields.items()}
-    unset = (arrays["lower"] == 0.0) & (arrays["upper"] == 0.0)
-    arrays["lower"][unset], arrays["upper"][unset] = -np.inf, np.inf
-    for key in ("velocity", "effort"):
-        arrays[key][arrays[key] == 0.0] = np.inf
+    for j in range(1, model.njoints):
+        if model.joints[j].nv == 1 and model.names[j] in urdf.joints:
+            k = model.joints[j].idx_q
+            for key in fields:
+                arrays[key][k] = getattr(urdf.joints[model.names[j]], key)
     for joint, limits in description.joint_limits.items():
         if not model.existJointName(joint):
             raise ValueError(f"{description.path}: joints.limits.{joint}: no joint {joint!r} in "
-                             f"{description.urdf.name} (its joints: {', '.join(model.names[1:])})")
+                             f"{urdf.path.name} (its joints: {', '.join(model.names[1:])})")
         k = model.joints[model.getJointId(joint)].idx_q
         for key, value in limits.items():
             arrays[key][k] = value
@@ -104,6 +170,21 @@ def _set_limits(model: pin.Model, description: RobotDescription) -> None:
                              f"below upper {arrays['upper'][k]:g}")
     for key, name in fields.items():
         setattr(model, name, arrays[key])
+
+
+def reduced_model(description: RobotDescription) -> tuple[pin.Model, Urdf]:
+    """The model of the robot's free joints (locked ones and those off ``[joints] chain`` removed),
+    its limits set, and the checked URDF it comes from. ValueError naming the file and key."""
+    urdf = robot_urdf(description)
+    locked = lock_values(description, urdf)
+    model = _locked(_urdf_model(description, urdf, locked), description, urdf, locked)
+    if model.nv == 0:
+        keys = " and ".join(k for k, v in (("joints.locked", description.locked), ("joints.chain", description.chain))
+                            if v)
+        raise ValueError(f"{description.path}: {keys}: no joint is left to move (every movable joint of "
+                         f"{urdf.path.name} is locked); unlock one")
+    _set_limits(model, description, urdf)
+    return model, urdf
 
 
 class SerialRobot(RobotModel):
@@ -128,10 +209,9 @@ class SerialRobot(RobotModel):
 
     def __init__(self, description: RobotDescription, gravity: float | None = None):
         self.description = description
-        self.model = _locked(_urdf_model(description), description)
+        self.model, self.urdf = reduced_model(description)
         self.data = self.model.createData()
         self._check_joints_and_links()
-        _set_limits(self.model, description)
         self.n = self.model.nv
         if len(description.configuration("home")) != self.n:
             raise ValueError(f"{description.path}: configurations.home: needs {self.n} joint values "
@@ -167,15 +247,17 @@ class SerialRobot(RobotModel):
         moving link without a valid inertia (no mass, or a rotational inertia that no body has:
         not symmetric positive semi-definite, or breaking the triangle inequality), which makes
         M(q) singular."""
-        model, urdf = self.model, self.description.urdf.name
+        model, urdf = self.model, self.urdf.path
+        names = {frame: link for link, frame in self.urdf.frames.items()}
         for j in range(1, model.njoints):
             joint, kind = model.names[j], model.joints[j].shortname()
             mimic = kind == "JointModelMimic"
             if not mimic and (not kind.startswith(("JointModelR", "JointModelP")) or model.joints[j].nq != 1):
                 what = next((text for word, text in _JOINT_KINDS.items() if word in kind), kind)
-                raise ValueError(f"{urdf}: joint {joint!r} is {what}; robofmu "
-                                 "supports revolute and prismatic joints")
+                raise ValueError(f"{urdf}: joint {joint!r}: is {what}; robofmu moves revolute, prismatic and "
+                                 "continuous joints: lock it, or leave it off [joints] chain")
             link = next(f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == j)
+            link = names.get(link, link)
             inertia = model.inertias[j]
             rotational = np.asarray(inertia.inertia)
             eigenvalues = np.linalg.eigvalsh(rotational) if np.all(np.isfinite(rotational)) else np.full(3, np.nan)
@@ -190,9 +272,18 @@ class SerialRobot(RobotModel):
                                  "must be >= 0 and at most the sum of the other two)")
 
     def _frame(self, frame: str, key: str) -> int:
-        fid = self.model.getFrameId(frame)
+        """The frame a user's name means: a link's (renamed in the model on a clash with a joint's
+        name, :attr:`Urdf.frames`), else a joint's; refused unless some joint moves it."""
+        if frame in self.urdf.frames:
+            fid = self.model.getFrameId(self.urdf.frames[frame], pin.FrameType.BODY)
+        else:
+            fid = self.model.getFrameId(frame)
         if fid >= len(self.model.frames):
-            raise ValueError(f"{self.description.path}: {key}: no frame {frame!r} in {self.description.urdf.name}")
+            raise ValueError(f"{self.description.path}: {key}: no frame {frame!r} in {self.urdf.path.name} "
+                             "(a link or joint of the URDF)")
+        if self.model.frames[fid].parentJoint == 0:
+            raise ValueError(f"{self.description.path}: {key}: no joint moves {frame!r} (it is fixed to the "
+                             "world, or every joint above it is locked); choose a frame below a moving joint")
         return fid
 
     def task_units(self, order: int = 0) -> list[str]:

@@ -16,10 +16,28 @@ positions), ``q_ref`` (joint reference), ``tau`` (joint efforts), and where the 
 ``x_ref`` (task reference), ``x`` (measured task coordinates, e.g. a plant's pose output) and
 ``grip`` (gripper). Nothing else in ``system/`` knows instance names.
 
+**The short form.** ``loop = "computed-torque"`` derives the diagram from the robot instead of
+listing it: ``robot``, ``loop``, ``stop_time`` and ``step`` are a whole experiment (``name``
+defaults to the file's stem). The blocks are the robot's (``<robot>/<block>.fmu``, its
+``blocks`` in order; ``trajectory = "<profile>"`` takes ``<robot>/trajectory_<profile>.fmu``),
+less a block whose outputs the trajectory already gives (the IK under a joint-space profile).
+Each input is wired from the one other block with an output of the same name (``ik.q_ref ->
+controller.q_ref``, ``plant.q -> fk.q``, ``trajectory.grip -> plant.grip``); an input no block
+gives is held at its declared start value, set as a parameter (a plant's ``f_ext``). The
+controller starts with the robot's ``default_gains`` (``"robot:gains.<set>.kp"``, ...) and, for a
+robot with a payload, ``payload_mass = "robot:payload.mass"``. Each role is the wired signal of its
+name (``q``, ``qd``, ``q_ref``, ``tau``, ``x_ref``, ``quat_ref``, ``grip``); ``x`` is the plant's
+pose output where it has one. The ports are read from the blocks' declared variables, so nothing
+here knows a robot. What the file also gives overrides: a ``[[blocks]]`` table replaces the
+derived block of its name as written (or adds a block); ``connections`` are added, each replacing
+the derived wiring of the input it drives (the whole vector); a ``[roles]`` entry replaces that
+role; ``[parameters.<block>]`` sets parameters of the derived blocks. A file with a ``loop`` may
+be a ``base``; a ``loop`` and a ``base`` in one file are refused.
+
 A file that cannot be used is refused with an :class:`ExperimentError` (a ValueError) in one
 line naming the file and the key: a TOML syntax error (with its line), a missing ``name``,
 ``blocks`` or block ``name`` / ``fmu``, a value of the wrong type, an unknown key, a base that
-does not exist.
+does not exist, an unknown loop or profile, an input two blocks could drive.
 """
 from __future__ import annotations
 
@@ -27,9 +45,12 @@ import difflib
 import math
 import os
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
-from robofmu.components.robots import is_robot_file, load_description
+from robofmu.components.blocks import block_type
+from robofmu.components.robots import RobotDescription, is_robot_file, load_description, load_model
+from robofmu.components.robots.description import PROFILE_PREFIX
 
 from robofmu.system import defaults
 from robofmu.system.diagram import System, Wire, parameter_address
@@ -44,6 +65,10 @@ ROLES = {"q": "measured joint positions", "qd": "measured joint velocities",
          "quat_ref": "a pose task's orientation reference (unit quaternion x, y, z, w)",
          "grip": "gripper closed"}
 
+#: Loops an experiment may derive (``loop = "..."``), and what each is.
+LOOPS = {"computed-torque": "the robot's blocks: trajectory -> (ik ->) controller <-> plant, "
+                            "fk and jacobian on the plant's q"}
+
 #: Top-level keys of an experiment file, and what each must hold.
 KEYS = {"name": "a string (the experiment's name)",
         "description": "a string",
@@ -57,7 +82,9 @@ KEYS = {"name": "a string (the experiment's name)",
         "fmu_dir": "a string (folder of the FMUs)",
         "abstract": "true or false (a base only, not listed as runnable)",
         "base": "a string (the name of the experiment this one builds on)",
-        "parameters": "a table of [parameters.<block>] tables"}
+        "parameters": "a table of [parameters.<block>] tables",
+        "loop": " or ".join(repr(k) for k in LOOPS) + " (the diagram derived from the robot)",
+        "trajectory": "a string (a named profile of the robot, [trajectories.<name>], for the loop)"}
 
 #: Keys of one ``[[blocks]]`` table.
 BLOCK_KEYS = {"name": "the instance name, a string",
@@ -155,10 +182,22 @@ def _check_file(path: Path, data: dict) -> None:
     for key in data:
         if key not in KEYS:
             raise _unknown(path, key, KEYS)
-    if "name" not in data:
+    if "name" not in data and "loop" not in data:
         raise ExperimentError(path, "name", "missing key: every experiment file names its experiment "
                                             "(name = \"...\")")
-    for key in ("name", "description", "robot", "fmu_dir", "base"):
+    if "loop" in data:
+        if not isinstance(data["loop"], str) or data["loop"] not in LOOPS:
+            raise _wrong(path, "loop", KEYS["loop"], data["loop"])
+        if "base" in data:
+            raise ExperimentError(path, "loop", "a file with a `base` takes the base's diagram; give "
+                                                "either `base` or `loop`")
+        if "robot" not in data:
+            raise ExperimentError(path, "robot", "missing key: `loop` derives the diagram from the robot "
+                                                 "(robot = \"NAME\" or \"path/NAME.toml\")")
+    elif "trajectory" in data:
+        raise ExperimentError(path, "trajectory", "picks the profile of a derived loop; it needs "
+                                                  "loop = \"computed-torque\"")
+    for key in ("name", "description", "robot", "fmu_dir", "base", "trajectory"):
         if key in data and not (isinstance(data[key], str) and (data[key].strip() or key == "description")):
             raise _wrong(path, key, "a non-empty string" if key != "description" else "a string", data[key])
     for key in ("stop_time", "step"):
@@ -219,9 +258,10 @@ def _check_file(path: Path, data: dict) -> None:
             if not isinstance(signal, str) or "." not in signal:
                 raise _wrong(path, f"roles.{role}", "a string 'block.variable'", signal)
     if "parameters" in data:
-        if "base" not in data:
-            raise ExperimentError(path, "parameters", "[parameters.<block>] tables need a `base`; without one, "
-                                                      "set a block's parameters in its [[blocks]] table")
+        if "base" not in data and "loop" not in data:
+            raise ExperimentError(path, "parameters", "[parameters.<block>] tables need a `base` or a `loop`; "
+                                                      "without one, set a block's parameters in its [[blocks]] "
+                                                      "table")
         tables = data["parameters"]
         if not isinstance(tables, dict):
             raise _wrong(path, "parameters", KEYS["parameters"], tables)
@@ -267,10 +307,148 @@ def _merged(path: Path, seen: tuple[Path, ...] = ()) -> dict:
         if "abstract" not in data:
             merged.pop("abstract", None)
         data = merged
+    elif "loop" in data:
+        data = _with_loop(path, data)
     elif "blocks" not in data:
         raise ExperimentError(path, "blocks", "missing key: the experiment needs [[blocks]] tables (name, "
                                               "fmu, parameters), or a `base` to take them from")
     return data
+
+
+# -- the short form: a loop derived from the robot's blocks ------------------------------------------
+@dataclass(frozen=True)
+class _Ports:
+    """One derived block's FMU and declared ports (vector bases in declaration order)."""
+
+    fmu: str
+    inputs: dict                 # base -> start value (a list for a vector, a scalar otherwise)
+    booleans: frozenset          # the Boolean inputs' bases
+    outputs: tuple
+    parameters: frozenset
+
+
+def _ports(description, fmu_block: str) -> _Ports:
+    """The ports ``fmu_block`` (a block or ``trajectory_<profile>``) of the robot declares."""
+    kind, _, described = description.block_of(fmu_block)
+    variables = block_type(described, kind)(load_model(described)).variables
+    starts: dict = {}
+    for v in variables:
+        if v.causality == "input":
+            starts.setdefault(v.base, []).append(v.start)
+    vectors = {v.base for v in variables if v.name != v.base}
+    return _Ports(fmu=f"{description.name}/{fmu_block}.fmu",
+                  inputs={b: s if b in vectors else s[0] for b, s in starts.items()},
+                  booleans=frozenset(v.base for v in variables if v.causality == "input" and v.kind == "Boolean"),
+                  outputs=tuple(dict.fromkeys(v.base for v in variables if v.causality == "output")),
+                  parameters=frozenset(v.base for v in variables if v.causality == "parameter"))
+
+
+def derive_loop(description: RobotDescription, trajectory: str | None = None) -> dict:
+    """The computed-torque loop of a robot as an experiment's tables (module docstring).
+
+    Parameters
+    ----------
+    description : RobotDescription
+        The robot (:func:`~robofmu.components.robots.load_description`).
+    trajectory : str, optional
+        A named profile (``[trajectories.<name>]``); default the robot's ``[trajectory]``.
+
+    Returns
+    -------
+    dict
+        ``blocks`` (list of {name, fmu, parameters}), ``connections`` (list of str) and
+        ``roles`` (dict), as an explicit experiment file would give them.
+
+    Raises
+    ------
+    ValueError
+        One line: an unknown profile, a robot without controller and plant, an input two blocks
+        could drive.
+    """
+    missing = [b for b in ("controller", "plant") if b not in description.blocks]
+    if missing:
+        raise ValueError(f"robot {description.name!r} has no {' or '.join(missing)} block (its blocks: "
+                         f"{', '.join(description.blocks)}); the computed-torque loop needs both")
+    if trajectory is not None:
+        description.block_of(f"{PROFILE_PREFIX}{trajectory}")      # ValueError naming its profiles
+    ports = {kind: _ports(description, f"{PROFILE_PREFIX}{trajectory}" if kind == "trajectory" and trajectory
+                          else kind) for kind in description.blocks}
+    given = set(ports["trajectory"].outputs) if "trajectory" in ports else set()
+    ports = {k: p for k, p in ports.items() if k == "trajectory" or not given & set(p.outputs)}
+    names = list(ports)
+    wires, held = [], {name: {} for name in names}
+    for d, (dst, p) in enumerate(ports.items()):
+        for i, (base, start) in enumerate(p.inputs.items()):
+            sources = [src for src in names if src != dst and base in ports[src].outputs]
+            if len(sources) > 1:
+                raise ValueError(f"robot {description.name!r}: input {dst}.{base} is an output of "
+                                 f"{' and '.join(sources)}; wire it in `connections`")
+            if sources:
+                wires.append(((d, i, base in p.booleans), Wire(sources[0], base, dst, base)))
+            else:
+                held[dst][base] = start
+    # the loop's Real signals in block order, then its Boolean events, then the blocks only observing
+    read = {w.src for _, w in wires}
+    wires = [w for _, w in sorted(wires, key=lambda kw: (kw[1].dst not in read, kw[0][2], kw[0][:2]))]
+    parameters = {name: {} for name in names}
+    gains = description.gain_set(description.default_gains).as_dict()
+    parameters["controller"] = {k: f"robot:gains.{description.default_gains}.{k}" for k in gains
+                                if k in ports["controller"].parameters}
+    if description.payload is not None and "payload_mass" in ports["controller"].parameters:
+        parameters["controller"]["payload_mass"] = "robot:payload.mass"
+    roles = {}
+    for role in ROLES:
+        source = next((w.src for w in wires if w.src_var == role), None)
+        if source is None and role == "x":          # a plant's pose output: the block giving q
+            source = next((w.src for w in wires if w.src_var == "q" and "x" in ports[w.src].outputs), None)
+        if source is not None:
+            roles[role] = f"{source}.{role}"
+    return {"blocks": [{"name": n, "fmu": ports[n].fmu, "parameters": {**parameters[n], **held[n]}} for n in names],
+            "connections": [str(w) for w in wires], "roles": roles}
+
+
+def _with_loop(path: Path, data: dict) -> dict:
+    """``data`` (a checked file with a ``loop``) with the derived diagram and the file's overrides."""
+    try:
+        description = load_description(data["robot"])
+    except ValueError as exc:
+        raise ExperimentError(path, "robot", str(exc)) from None
+    profile = data.get("trajectory")
+    if profile is not None and profile not in description.profiles:
+        raise ExperimentError(path, "trajectory", f"robot {description.name!r} has no profile {profile!r} "
+                                                  f"(its named profiles: {', '.join(description.profiles) or 'none'})")
+    try:
+        derived = derive_loop(description, profile)
+    except ValueError as exc:
+        raise ExperimentError(path, "loop", str(exc)) from None
+    blocks = derived["blocks"]
+    for block in data.get("blocks", []):                 # a block of the file replaces the derived one
+        names = [b["name"] for b in blocks]
+        if block["name"] in names:
+            blocks[names.index(block["name"])] = block
+        else:
+            blocks.append(block)
+    names = [b["name"] for b in blocks]
+    for block, params in data.pop("parameters", {}).items():
+        if block not in names:
+            raise ExperimentError(path, f"parameters.{block}",
+                                  f"parameters for unknown block {block!r} (blocks: {', '.join(names)})")
+        blocks[names.index(block)]["parameters"] = {**blocks[names.index(block)].get("parameters", {}), **params}
+    own = [Wire.parse(w) for w in data.get("connections", [])]
+    driven = {(w.dst, _base(w.dst_var)) for w in own}
+    wires = [w for w in derived["connections"] if (Wire.parse(w).dst, Wire.parse(w).dst_var) not in driven]
+    data["connections"] = wires + [str(w) for w in own]
+    data["roles"] = {**derived["roles"], **data.get("roles", {})}
+    data["blocks"] = blocks
+    data.setdefault("name", path.stem)
+    data.pop("loop")
+    data.pop("trajectory", None)
+    return data
+
+
+def _base(variable: str) -> str:
+    """``tau`` of ``tau[2]`` (a matrix entry ``J[1,2]``: ``J``)."""
+    return variable.split("[", 1)[0]
 
 
 def _resolve(value, robot: str | None, where: str):

@@ -369,14 +369,12 @@ def derive_loop(description: RobotDescription, trajectory: str | None = None) ->
     if missing:
         raise ValueError(f"robot {description.name!r} has no {' or '.join(missing)} block (its blocks: "
                          f"{', '.join(description.blocks)}); the computed-torque loop needs both")
-    if trajectory is not None:
-        description.block_of(f"{PROFILE_PREFIX}{trajectory}")      # ValueError naming its profiles
     ports = {kind: _ports(description, f"{PROFILE_PREFIX}{trajectory}" if kind == "trajectory" and trajectory
-                          else kind) for kind in description.blocks}
+                          else kind) for kind in description.blocks}         # ValueError naming the profiles
     given = set(ports["trajectory"].outputs) if "trajectory" in ports else set()
-    ports = {k: p for k, p in ports.items() if k == "trajectory" or not given & set(p.outputs)}
+    ports = {k: p for k, p in ports.items() if k in ("trajectory", "controller", "plant") or not given & set(p.outputs)}
     names = list(ports)
-    wires, held = [], {name: {} for name in names}
+    found, held = [], {name: {} for name in names}
     for d, (dst, p) in enumerate(ports.items()):
         for i, (base, start) in enumerate(p.inputs.items()):
             sources = [src for src in names if src != dst and base in ports[src].outputs]
@@ -384,12 +382,13 @@ def derive_loop(description: RobotDescription, trajectory: str | None = None) ->
                 raise ValueError(f"robot {description.name!r}: input {dst}.{base} is an output of "
                                  f"{' and '.join(sources)}; wire it in `connections`")
             if sources:
-                wires.append(((d, i, base in p.booleans), Wire(sources[0], base, dst, base)))
+                found.append((d, i, base in p.booleans, Wire(sources[0], base, dst, base)))
             else:
                 held[dst][base] = start
     # the loop's Real signals in block order, then its Boolean events, then the blocks only observing
-    read = {w.src for _, w in wires}
-    wires = [w for _, w in sorted(wires, key=lambda kw: (kw[1].dst not in read, kw[0][2], kw[0][:2]))]
+    read = {wire.src for *_, wire in found}
+    found.sort(key=lambda f: (f[3].dst not in read, f[2], f[0], f[1]))
+    wires = [wire for *_, wire in found]
     parameters = {name: {} for name in names}
     gains = description.gain_set(description.default_gains).as_dict()
     parameters["controller"] = {k: f"robot:gains.{description.default_gains}.{k}" for k in gains
@@ -422,6 +421,12 @@ def _with_loop(path: Path, data: dict) -> dict:
     except ValueError as exc:
         raise ExperimentError(path, "loop", str(exc)) from None
     blocks = derived["blocks"]
+    own = [Wire.parse(w) for w in data.get("connections", [])]
+    driven = {(w.dst, _base(w.dst_var)) for w in own}
+    for block in blocks:                                 # an input the file wires is no longer held
+        for dst, base in driven:
+            if dst == block["name"]:
+                block["parameters"].pop(base, None)
     for block in data.get("blocks", []):                 # a block of the file replaces the derived one
         names = [b["name"] for b in blocks]
         if block["name"] in names:
@@ -434,8 +439,6 @@ def _with_loop(path: Path, data: dict) -> dict:
             raise ExperimentError(path, f"parameters.{block}",
                                   f"parameters for unknown block {block!r} (blocks: {', '.join(names)})")
         blocks[names.index(block)]["parameters"] = {**blocks[names.index(block)].get("parameters", {}), **params}
-    own = [Wire.parse(w) for w in data.get("connections", [])]
-    driven = {(w.dst, _base(w.dst_var)) for w in own}
     wires = [w for w in derived["connections"] if (Wire.parse(w).dst, Wire.parse(w).dst_var) not in driven]
     data["connections"] = wires + [str(w) for w in own]
     data["roles"] = {**derived["roles"], **data.get("roles", {})}

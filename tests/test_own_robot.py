@@ -34,7 +34,7 @@ from robofmu.components import SOURCE_HASH, robot_data_hash, source_hash
 from robofmu.components.robots import (ROBOTS_DIR, available, description_path, is_robot_file, load_description,
                                        load_model)
 from robofmu.system import experiment
-from robofmu.system.experiment import EXPERIMENTS_DIR, ExperimentError
+from robofmu.system.experiment import ExperimentError
 from robofmu.system.fmu import block_identity, stale_reasons
 
 CLI = [sys.executable, "-m", "robofmu.system.cli"]
@@ -63,8 +63,10 @@ def write_robot(folder: Path, name: str = "myarm", source: str = "planar2r", kp:
 
 
 def write_experiment(path: Path, robot: str, name: str = "myexp", fmu_folder: str = "myarm") -> Path:
-    """planar2r-nr's experiment with ``robot`` (as written in the file) and its FMUs under ``fmu_folder/``."""
-    text = (EXPERIMENTS_DIR / "planar2r-nr.toml").read_text()
+    """planar2r-nr's experiment, written out block by block (its explicit form, test data: the
+    packaged one derives its wiring), with ``robot`` (as written in the file) and its FMUs under
+    ``fmu_folder/``."""
+    text = (Path(__file__).parent / "data" / "explicit_experiments" / "planar2r-nr.toml").read_text()
     for old, new in (('name = "planar2r-nr"', f'name = "{name}"'), ('robot = "planar2r"', f'robot = "{robot}"'),
                      ('fmu = "planar2r/', f'fmu = "{fmu_folder}/')):
         assert old in text

@@ -16,6 +16,7 @@ name. A ``.xacro`` file is expanded by the ``xacro`` package first.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import io
 import math
 from dataclasses import dataclass
@@ -23,7 +24,7 @@ from pathlib import Path
 from xml.etree import ElementTree
 from xml.parsers import expat
 
-__all__ = ["UrdfError", "UrdfJoint", "Urdf", "read_urdf", "srdf_states", "MOVABLE"]
+__all__ = ["UrdfError", "UrdfJoint", "Urdf", "read_urdf", "expand_xacro", "srdf_states", "MOVABLE"]
 
 #: Joint types with a coordinate of their own (a mimic follower aside).
 MOVABLE = ("revolute", "prismatic", "continuous")
@@ -315,10 +316,16 @@ def _joint(path: Path, element, name: str) -> UrdfJoint:
                      mimic, multiplier, offset)
 
 
-def _expand(path: Path, xacro_args: dict | None) -> bytes:
-    """The URDF that ``path`` (a ``.xacro`` file) expands to with ``xacro_args``, as bytes."""
-    import xacro
-
+def expand_xacro(path: str | Path, xacro_args: dict | None = None) -> bytes:
+    """The URDF that ``path`` (a ``.xacro`` file) expands to with ``xacro_args``, as bytes (UTF-8);
+    UrdfError naming the file for a DTD or entity in it, or what xacro refuses."""
+    path = Path(path)
+    # Imported by name, not by an import statement: a FMU carries the expanded URDF and never
+    # runs xacro, so xacro must not become a requirement of the FMUs (system/packaging/requirements).
+    try:
+        xacro = importlib.import_module("xacro")
+    except ImportError:
+        raise UrdfError(path, "xacro", "the xacro package is not installed", "pip install xacro") from None
     _parse(path, path.read_bytes(), "xacro file")          # no DTD or entity in what xacro reads
     chatter = io.StringIO()
     try:
@@ -348,7 +355,7 @@ def read_urdf(path: str | Path, xacro_args: dict | None = None) -> Urdf:
     """
     path = Path(path)
     if path.suffix == ".xacro":
-        data = _expand(path, xacro_args)
+        data = expand_xacro(path, xacro_args)
     else:
         if xacro_args:
             raise UrdfError(path, "xacro_args", "given for a file that is not a .xacro file",

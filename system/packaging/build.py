@@ -73,14 +73,24 @@ def check_name(description: RobotDescription) -> RobotDescription:
 
 def stage_robot(description: RobotDescription, folder: Path) -> list[Path]:
     """Copy a robot's data into ``folder`` as an FMU carries it: ``<name>.toml``, for a URDF robot
-    the URDF the description resolved (wherever it lives) as ``<name>.urdf``, and the CSV tables
-    its profiles read at their paths relative to the TOML."""
+    the URDF the description resolved (wherever it lives) as ``<name>.urdf`` (a ``.xacro`` file
+    expanded with its ``xacro_args``: the FMU needs no xacro), its SRDF as ``<name>.srdf`` (where
+    :func:`robofmu.components.robots.description.read` looks beside the URDF's copy), and the CSV
+    tables its profiles read at their paths relative to the TOML."""
+    from robofmu.components.robots.urdf import expand_xacro
+
     folder.mkdir(parents=True, exist_ok=True)
     copies = [folder / f"{description.name}.toml"]
     shutil.copyfile(description.path, copies[0])
     if description.urdf is not None:
         copies.append(folder / f"{description.name}.urdf")
-        shutil.copyfile(description.urdf, copies[1])
+        if description.urdf.suffix == ".xacro":
+            copies[-1].write_bytes(expand_xacro(description.urdf, description.xacro_args))
+        else:
+            shutil.copyfile(description.urdf, copies[-1])
+    if description.srdf is not None:
+        copies.append(folder / f"{description.name}.srdf")
+        shutil.copyfile(description.srdf, copies[-1])
     for table in description.tables:
         copies.append(folder / table)
         copies[-1].parent.mkdir(parents=True, exist_ok=True)
@@ -170,7 +180,8 @@ def checked(description, log=print) -> None:
     Raises
     ------
     ValueError
-        Naming the problem (joint, limit and time for the reference)."""
+        Naming the problem (joint, limit and time for the reference; for a velocity limit the
+        worst ratio and the time law that fits)."""
     from robofmu.components.preflight import check_references
 
     for profile, found in check_references(description).items():
@@ -180,5 +191,6 @@ def checked(description, log=print) -> None:
         margin = "no position limits" if found.position_margin == float("inf") else (
             f"joints at least {found.position_margin:.3g} from their position limits")
         which = f" (profile {profile})" if profile else ""
+        fastest = f" ({found.fastest_joint} at t = {found.fastest_time:.3g} s)" if found.fastest_joint else ""
         log(f"{description.name}: reference{which} checked over {found.duration:g} s ({found.samples} samples): "
-            f"{margin}, at most {found.speed_ratio * 100:.0f} % of their velocity limits{residual}")
+            f"{margin}, at most {found.speed_ratio * 100:.0f} % of their velocity limits{fastest}{residual}")

@@ -200,6 +200,39 @@ class TrapezoidLaw:
         return self.length - 0.5 * a * r * r, a * r, -a
 
 
+#: The profiles' time-law parameters and how each changes when the same path runs r times slower
+#: (t -> r t divides every rate by r and every acceleration by r^2): the power of r it takes.
+TIME_SCALING = {"duration": 1, "durations": 1, "v_max": -1, "omega_max": -1, "a_max": -2, "alpha_max": -2}
+
+
+def slowed(parameters: dict, ratio: float, digits: int = 2) -> dict:
+    """The time-law parameters of a profile (the keys of :data:`TIME_SCALING` it has) for the same
+    path ``ratio`` times slower, each rounded to ``digits`` significant digits towards slower
+    (durations up, limits down), lists element by element.
+
+    Parameters
+    ----------
+    parameters : dict
+        A profile's parameters as its ``[trajectory]`` table gives them.
+    ratio : float
+        > 0: the factor the path's time law is stretched by.
+
+    Returns
+    -------
+    dict
+        Only the scaled keys, with their new values.
+    """
+    def scaled(value, power):
+        value = float(value) * ratio ** power
+        unit = 10.0 ** (math.floor(math.log10(value)) - digits + 1)
+        steps = math.ceil(value / unit - 1e-9) if power > 0 else math.floor(value / unit + 1e-9)
+        return float(f"{steps * unit:.{digits}g}")
+
+    return {key: [scaled(v, TIME_SCALING[key]) for v in value] if isinstance(value, list)
+            else scaled(value, TIME_SCALING[key])
+            for key, value in parameters.items() if key in TIME_SCALING}
+
+
 #: Communication points within this many seconds of a breakpoint are evaluated at it.
 SNAP_TOLERANCE = 1e-9
 

@@ -40,10 +40,12 @@ def test_a_reference_beyond_a_position_limit_is_refused_naming_joint_limit_and_t
     path = copy_robot("rpp", lambda d: set_key(d, "joints", {"limits": {joint: {"upper": 1.5}}}))
     times, q, _ = _rpp_reference()
     first = times[np.flatnonzero(q[:, 1] > 1.5)[0]]          # the first sample beyond it
+    deepest = int(np.argmax(q[:, 1]))                         # and the deepest: the worst, not the first
     with pytest.raises(ReferenceRefused, match=re.escape(
-            f"the reference at t = {first:.6g} s puts joint 2 ({joint}) at ")) as info:
+            f"{path}: trajectory: the reference drives joint 2 ({joint}) beyond its upper limit 1.5 m "
+            f"(joints.limits.{joint}.upper) from t = {first:.6g} s, at worst to {q[deepest, 1]:.6g} m "
+            f"({q[deepest, 1] - 1.5:.3g} m beyond) at t = {times[deepest]:.6g} s; ")):
         check_reference(read(path))
-    assert info.value.args[0].endswith("m, beyond its upper limit 1.5 m")
 
 
 def test_a_reference_beyond_a_velocity_limit_is_refused_naming_joint_limit_and_time(copy_robot):
@@ -51,10 +53,12 @@ def test_a_reference_beyond_a_velocity_limit_is_refused_naming_joint_limit_and_t
     path = copy_robot("rpp", lambda d: set_key(d, "joints", {"limits": {joint: {"velocity": 1.0}}}))
     times, _, qd = _rpp_reference()
     first = times[np.flatnonzero(np.abs(qd[:, 0]) > 1.0)[0]]
+    worst = int(np.argmax(np.abs(qd[:, 0])))
     with pytest.raises(ReferenceRefused, match=re.escape(
-            f"the reference at t = {first:.6g} s drives joint 1 ({joint}) at ")) as info:
+            f"{path}: trajectory: the reference drives joint 1 ({joint}) beyond its velocity limit 1 rad/s "
+            f"(joints.limits.{joint}.velocity) from t = {first:.6g} s, at worst {abs(qd[worst, 0]):.3g} × the limit "
+            f"({abs(qd[worst, 0]):.6g} rad/s) at t = {times[worst]:.6g} s; ")):
         check_reference(read(path))
-    assert info.value.args[0].endswith("rad/s, beyond its velocity limit 1 rad/s")
 
 
 def test_a_task_reference_the_ik_cannot_follow_is_refused_naming_the_time(copy_robot):

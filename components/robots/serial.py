@@ -153,18 +153,21 @@ def _set_limits(model: pin.Model, description: RobotDescription, urdf: Urdf) -> 
     fields = {"lower": "lowerPositionLimit", "upper": "upperPositionLimit", "velocity": "velocityLimit",
               "effort": "effortLimit"}
     arrays = {key: getattr(model, name).copy() for key, name in fields.items()}
+    def index(j: int, key: str) -> int:         # positions by q, rates and efforts by v (a floating joint: nq != nv)
+        return model.joints[j].idx_q if key in ("lower", "upper") else model.joints[j].idx_v
+
     for j in range(1, model.njoints):
         if model.joints[j].nv == 1 and model.names[j] in urdf.joints:
-            k = model.joints[j].idx_q
             for key in fields:
-                arrays[key][k] = getattr(urdf.joints[model.names[j]], key)
+                arrays[key][index(j, key)] = getattr(urdf.joints[model.names[j]], key)
     for joint, limits in description.joint_limits.items():
         if not model.existJointName(joint):
             raise ValueError(f"{description.path}: joints.limits.{joint}: no joint {joint!r} in "
                              f"{urdf.path.name} (its joints: {', '.join(model.names[1:])})")
-        k = model.joints[model.getJointId(joint)].idx_q
+        j = model.getJointId(joint)
         for key, value in limits.items():
-            arrays[key][k] = value
+            arrays[key][index(j, key)] = value
+        k = model.joints[j].idx_q
         if not arrays["lower"][k] < arrays["upper"][k]:
             raise ValueError(f"{description.path}: joints.limits.{joint}: lower {arrays['lower'][k]:g} must be "
                              f"below upper {arrays['upper'][k]:g}")
@@ -255,7 +258,7 @@ class SerialRobot(RobotModel):
             if not mimic and (not kind.startswith(("JointModelR", "JointModelP")) or model.joints[j].nq != 1):
                 what = next((text for word, text in _JOINT_KINDS.items() if word in kind), kind)
                 raise ValueError(f"{urdf}: joint {joint!r}: is {what}; robofmu moves revolute, prismatic and "
-                                 "continuous joints: lock it, or leave it off [joints] chain")
+                                 "continuous joints: give a [joints] chain that leaves it out")
             link = next(f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == j)
             link = names.get(link, link)
             inertia = model.inertias[j]

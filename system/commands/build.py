@@ -62,9 +62,25 @@ def report_staleness(description, out: Path, missing: bool = False) -> tuple[lis
     return lines, everything
 
 
+def located(description, exc: BaseException) -> str:
+    """A refusal of ``description``'s robot on one line, naming a file: the message itself where it
+    starts with one of the robot's files (the TOML, URDF, SRDF: the user's paths), else prefixed
+    with the TOML and what was checked (a reference beyond a limit: ``trajectory``)."""
+    from robofmu.components.preflight import ReferenceRefused
+
+    text = one_line(exc)
+    files = [str(f) for f in (description.path, description.urdf, getattr(description, "srdf", None)) if f]
+    if any(text.startswith(f"{f}: ") for f in files):
+        return text
+    key = "robot"
+    if isinstance(exc, ReferenceRefused):
+        key = "configurations.home" if text.startswith("configuration home") else "trajectory"
+    return f"{description.path}: {key}: {text}"
+
+
 def main(args) -> int:
     from robofmu.components.robots import available, is_robot_file, load_description
-    from robofmu.system.packaging.build import build, check_name
+    from robofmu.system.packaging.build import build, check_name, checked
     from robofmu.system.packaging.validate import problems_of
 
     known = available()
@@ -91,6 +107,12 @@ def main(args) -> int:
     except UsageError as exc:
         say("build", exc)
         return 2
+    for description in descriptions:
+        try:
+            checked(description, log=lambda *_: None)
+        except ValueError as exc:        # the user's files: TOML, URDF, SRDF, CSV, the reference
+            say("build", located(description, exc))
+            return 2
 
     status = 0
     for description in descriptions:

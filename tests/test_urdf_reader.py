@@ -400,3 +400,26 @@ def test_a_broken_srdf_is_refused_naming_the_toml_key_and_the_srdf(tmp_path, srd
     with pytest.raises(ValueError) as info:
         read(path)
     assert str(info.value).startswith(f"{path}: {key}: ") and problem in str(info.value), str(info.value)
+
+
+def test_a_fmu_carries_the_expanded_urdf_and_the_srdf_and_reads_the_same_robot(tmp_path):
+    """stage_robot (what ``robofmu build`` puts in resources/robot/) for a xacro robot with an SRDF
+    home: the expanded URDF as arm.urdf (no xacro left), the SRDF as arm.srdf; the description the
+    FMU reads from those copies has the same home and the same kinematics as the user's."""
+    from robofmu.system.packaging.build import stage_robot
+
+    (tmp_path / "arm.urdf.xacro").write_text(XACRO)
+    (tmp_path / "arm.srdf").write_text(SRDF.replace('<joint name="gripper" value="0.02"/>', ""))
+    user = read(_toml(tmp_path, urdf='"arm.urdf.xacro"', extra='xacro_args = { reach = 0.45 }\nsrdf = "arm.srdf"',
+                      home='"srdf:ready"'))
+    folder = tmp_path / "resources" / "robot"
+    stage_robot(user, folder)
+    assert sorted(p.name for p in folder.iterdir()) == ["arm.srdf", "arm.toml", "arm.urdf"]
+    assert "xacro:" not in (folder / "arm.urdf").read_text()
+    carried = read(folder / "arm.toml", urdf=folder / "arm.urdf")
+    assert carried.srdf == folder / "arm.srdf" and carried.xacro_args == {}
+    assert carried.configuration("home") == user.configuration("home") == (0.7, -0.9)
+    mine, theirs = load_model(user), load_model(carried)
+    q = np.array([0.2, -0.3])
+    assert np.array_equal(mine.pose(q).homogeneous, theirs.pose(q).homogeneous)
+    assert np.array_equal(mine.mass_matrix(q), theirs.mass_matrix(q))

@@ -71,6 +71,41 @@ def tracking_metrics(result: Result, roles: Roles) -> Tracking:
                     effort_units[:n], tcp, orientation, ev, None if tau is None else np.max(np.abs(tau), axis=0), e[-1], speed)
 
 
+def limit_excursions(result: Result, roles: Roles, model=None) -> list[tuple[str, str]]:
+    """The recorded points at which a joint lies beyond its limits (the robot's: the URDF's or
+    its description's): position from the ``q`` role, velocity from ``qd`` where recorded.
+
+    Returns
+    -------
+    list of (str, str)
+        One entry per joint and limit kind crossed: (a line for a report, a few words for a
+        summary), ``("joint 3 (elbow_joint) beyond its velocity limit 3.15 rad/s at t = 0.187 s,
+        1 step", "joint 3 (elbow_joint) beyond its velocity limit for 1 step")``; [] when every
+        joint stayed within its limits.
+    """
+    model = model or roles.model()
+    lower, upper = model.position_limits()
+    speed = model.velocity_limits()
+    checks = [("position", roles.q, lower, upper, model.joint_units(0))]
+    if roles.qd and f"{roles.qd}[1]" in result.columns:
+        checks.append(("velocity", roles.qd, -speed, speed, model.joint_units(1)))
+    found = []
+    for kind, base, low, high, units in checks:
+        values = result.vector(base)
+        for j in range(values.shape[1]):
+            rows = np.flatnonzero((values[:, j] < low[j]) | (values[:, j] > high[j]))
+            if not rows.size:
+                continue
+            joint = f"joint {j + 1} ({model.joint_names[j]}) beyond its {kind} limit"
+            first, last = float(result.time[rows[0]]), float(result.time[rows[-1]])
+            span = f"at t = {first:g} s" if first == last else f"from t = {first:g} s to {last:g} s"
+            limits = f"{high[j]:.6g} {units[j]}" if kind == "velocity" else \
+                f"[{low[j]:.6g}, {high[j]:.6g}] {units[j]}"
+            steps = f"{rows.size} step{'' if rows.size == 1 else 's'}"
+            found.append((f"{joint} {limits} {span}, {steps}", f"{joint} for {steps}"))
+    return found
+
+
 def markdown_table(rows: list[list], header: list[str]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]

@@ -48,7 +48,7 @@ from robofmu.system.exchange import (Failure, Fmi2Functions, Inputs, Ports, gett
                                      stepper)
 from robofmu.system.fmu import FMUInstance, FMUError, LogMessage
 from robofmu.system.interrupt import sigint_flag
-from robofmu.system.result import Result
+from robofmu.system.result import HEALTH, Message, Result, group_messages, status_meanings
 
 __all__ = ["DiagramError", "Interrupted", "Master", "Result", "SimulationError", "available_memory", "step_count"]
 
@@ -141,6 +141,10 @@ class Master:
         ``progress(fraction, t)`` about 20 times in a run (t in s).
     log : callable, optional
         Receives every FMU log message as it arrives.
+    debug : bool
+        Keep the FMUs' debug messages (status OK: a failure's traceback, ...) in the result's
+        :attr:`~robofmu.system.result.Result.log` too; by default it keeps their warnings and
+        errors only.
 
     Attributes
     ----------
@@ -149,17 +153,24 @@ class Master:
         :attr:`order` and :attr:`warnings` read it.
     blocks : dict of str to FMUInstance
         The instantiated blocks during a run.
+    heard : list of Message
+        What the FMUs logged during the last run (as :attr:`debug` keeps it), each message with
+        the communication point it arrived at; every result of the run, a partial one on a
+        :class:`SimulationError` too, carries it (``log``) and its groups (``messages``).
     """
 
     def __init__(self, system: System, record: list[str] | None = None,
                  progress: Callable[[float, float], None] | None = None,
-                 log: Callable[[LogMessage], None] | None = None):
+                 log: Callable[[LogMessage], None] | None = None, debug: bool = False):
         self.system = system
         self.record = record
         self.progress = progress
         self.log = log
+        self.debug = debug
         self.plan: Plan | None = None
         self.blocks: dict[str, FMUInstance] = {}
+        self.heard: list[Message] = []
+        self._clock = [0.0]            # the communication point the messages arrive at (s)
 
     # -- the plan ----------------------------------------------------------------------------------
     def check(self) -> list[str]:
@@ -246,7 +257,7 @@ class Master:
         -------
         Result
             Every recorded output at ``start_time + k step``, k = 0 .. n, shape (n + 1, m),
-            with the outputs' units.
+            with the outputs' units and what the FMUs said (``log``, ``messages``: :attr:`heard`).
 
         Raises
         ------
@@ -295,12 +306,36 @@ class Master:
             finally:
                 self.close()
 
+    def _hear(self, message: LogMessage) -> None:
+        """Keep ``message`` (a warning or worse; any with :attr:`debug`) with the current point,
+        then pass it to :attr:`log`."""
+        if self.debug or message.status != "OK":
+            prefix = f"{message.instance}: "
+            text = message.message[len(prefix):] if message.message.startswith(prefix) else message.message
+            self.heard.append(Message(message.instance, message.status, message.category, text, self._clock[0]))
+        if self.log is not None:
+            self.log(message)
+
+    def _result(self, times: np.ndarray, recorded: np.ndarray, info: dict) -> Result:
+        """The :class:`Result` of the points recorded, with what the FMUs said."""
+        columns = list(self.columns)
+        meanings = {}
+        for column in columns:
+            block, _, name = column.partition(".")
+            if name == "status" and HEALTH.get(name) == 0.0:      # a status whose codes its description names
+                meanings[column] = status_meanings(self.nodes[block].variables[name].description)
+        heard = list(self.heard)
+        return Result(times, columns, recorded, info, dict(self.units), heard,
+                      group_messages(heard, times, columns, recorded, meanings))
+
     def _instantiate(self, start_time: float, stop_time: float) -> None:
         self.blocks = {}
+        self.heard = []
+        self._clock[0] = start_time
         for name in self.order:
             node = self.nodes[name]
             try:
-                block = FMUInstance(node.path, name, echo=self.log, model_description=node.model_description)
+                block = FMUInstance(node.path, name, echo=self._hear, model_description=node.model_description)
             except FMUError as exc:
                 raise SimulationError(str(exc), name, None, None) from None
             self.blocks[name] = block
@@ -401,12 +436,13 @@ class Master:
         recorded = np.empty((n_steps + 1, len(self.keep)))
         times = t0 + h * np.arange(n_steps + 1)
         first, exchange, steps = self._operations(algorithm)
+        clock = self._clock
         every = max(1, n_steps // 20)
         t, n_recorded = t0, 0
         wall = _time.perf_counter()
         try:
             for k in range(n_steps + 1):
-                t = times[k]
+                t = clock[0] = times[k]
                 for op in (first if k == 0 else exchange):    # Jacobi, too, starts consistent
                     op()
                 if not math.isfinite(real_signals.dot(ones)) and not np.isfinite(real_signals).all():
@@ -446,16 +482,15 @@ class Master:
                            + (": " + logged[-1] if logged else f" (status {exc.message})"))
             else:
                 message = f"{exc.block}: {exc.message}"
-            result = Result(times[:n_recorded].copy(), list(self.columns), recorded[:n_recorded].copy(),
-                            {"failed": message, "algorithm": algorithm, "step": h}, dict(self.units))
+            result = self._result(times[:n_recorded].copy(), recorded[:n_recorded].copy(),
+                                  {"failed": message, "algorithm": algorithm, "step": h})
             if csv_path is not None:
                 result.to_csv(csv_path)
             raise SimulationError(message + (f"\nresults up to t = {times[n_recorded - 1]:.9g} s kept"
                                              + (f" in {csv_path}" if csv_path else "") if n_recorded else ""),
                                   exc.block, float(t), result, message) from None
-        result = Result(times, list(self.columns), recorded,
-                        {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall,
-                         "order": list(self.order)}, dict(self.units))
+        result = self._result(times, recorded, {"algorithm": algorithm, "step": h,
+                                                "wall_time": _time.perf_counter() - wall, "order": list(self.order)})
         if csv_path is not None:
             result.to_csv(csv_path)
         return result
@@ -469,8 +504,8 @@ class Master:
             return Interrupted(reason, block, None, None, reason)
         t = float(times[n_recorded - 1])
         reason = f"interrupted at t = {t:.9g} s{how}"
-        result = Result(times[:n_recorded].copy(), list(self.columns), recorded[:n_recorded].copy(),
-                        {"interrupted": t, "algorithm": algorithm, "step": h}, dict(self.units))
+        result = self._result(times[:n_recorded].copy(), recorded[:n_recorded].copy(),
+                              {"interrupted": t, "algorithm": algorithm, "step": h})
         if csv_path is not None:
             result.to_csv(csv_path)
         return Interrupted(reason + f"; results up to t = {t:.9g} s kept" + (f" in {csv_path}" if csv_path else ""),

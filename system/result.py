@@ -7,14 +7,224 @@ from the FMUs' model descriptions and live in :attr:`Result.units` only. For lar
 same table is written as Parquet (:meth:`Result.to_parquet`: float64 columns, exact, about 30x
 faster to write than the CSV), with each column's unit in its field metadata and ``info`` in
 the file's.
+
+A run by the master also carries what its FMUs logged: :attr:`Result.log`, every message with
+the communication point it arrived at (:class:`Message`), and :attr:`Result.messages`, the same
+grouped (:func:`group_messages`), with the excursions the record shows in the blocks' health
+outputs (:data:`HEALTH`: a ``status`` other than 0, a ``reachable`` or ``within_limits`` that is
+false).
 """
 from __future__ import annotations
 
 import csv
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+#: The outputs that tell whether a block did what it was asked, by variable name, and the value
+#: that means it did: a recorded ``<instance>.status`` other than 0 or a ``reachable`` /
+#: ``within_limits`` that is false is an excursion (:func:`group_messages`). A ``status``'s codes
+#: are named by its description, ``"0 converged, 1 not converged (out of reach?), ..."``.
+HEALTH = {"status": 0.0, "reachable": 1.0, "within_limits": 1.0}
+
+#: A number in a message (not a digit inside a name such as ``panda_joint1``): what
+#: :func:`message_pattern` replaces by ``#``.
+_NUMBER = re.compile(r"(?<![\w.])[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|nan|inf)(?!\w)")
+#: The time a block puts before its message (``"t = 0.33 s: "``): the message's time says it.
+_TIME_PREFIX = re.compile(r"^t = [^ ]+ s: ")
+
+
+@dataclass(frozen=True)
+class Message:
+    """One message an FMU logged during a run.
+
+    Attributes
+    ----------
+    block : str
+        The instance that logged it.
+    status : str
+        ``"WARNING"``, ``"ERROR"``, ``"DISCARD"``, ``"FATAL"``, or ``"OK"`` (debug).
+    category : str
+        The FMI log category (``"logStatusWarning"``, ...).
+    text : str
+        The FMU's words, without the ``"<block>: "`` the slave puts before them.
+    time : float
+        The communication point (s) at which it arrived: the start time during initialization,
+        t during the exchange at t and the step from t.
+    """
+
+    block: str
+    status: str
+    category: str
+    text: str
+    time: float
+
+    def __str__(self) -> str:
+        return f"t = {self.time:.9g} s [{self.status}] {self.block}: {self.text}"
+
+
+@dataclass(frozen=True)
+class MessageGroup:
+    """Messages of one block alike but for their numbers, or one excursion of a health output.
+
+    Attributes
+    ----------
+    block : str
+    status : str
+        The messages' status (``"WARNING"``, ...); ``""`` for a group read from the record only
+        (no message told it).
+    text : str
+        The first message's words (its time prefix removed), or what the health output says
+        (``"not converged (status 1, 2670 steps)"``).
+    count : int
+        Messages in the group (0: read from the record only).
+    first, last : float
+        The first message's time and the last instant of the group (s): its last message or the
+        end of the excursion the record shows, whichever is later (a group read from the record:
+        its first and last points).
+    last_message : float or None
+        The last message's time (s); None for a group read from the record.
+    steps : int or None
+        Recorded points at which the block's health outputs (:data:`HEALTH`) were off in the
+        excursions the messages started; None where nothing recorded tells.
+    signals : tuple of str
+        Those outputs (``"ik.reachable"``).
+    """
+
+    block: str
+    status: str
+    text: str
+    count: int
+    first: float
+    last: float
+    last_message: float | None = None
+    steps: int | None = None
+    signals: tuple[str, ...] = ()
+
+    def __str__(self) -> str:
+        """One line: ``ik: not converged (status 1, 2670 steps) from t = 0.33 s to 3 s, 2670
+        steps``, ``plant: WARNING once at t = 0.187 s: joint 3 ... (plant.within_limits off at
+        t = 0.187 s, 1 step)``."""
+        if not self.count:
+            return f"{self.block}: {self.text} {_span(self.first, self.last)}, {_steps(self.steps)}"
+        said = self.text.split("\n", 1)[0]
+        times = "once" if self.count == 1 else f"{self.count} times"
+        line = f"{self.block}: {self.status} {times} {_span(self.first, self.last_message)}: {said}"
+        if self.steps is not None:
+            line += (f" ({' and '.join(self.signals)} off {_span(self.first, self.last)}, "
+                     f"{_steps(self.steps)})")
+        return line
+
+    def short(self) -> str:
+        """A few words for a summary line: ``ik not converged for 2670 steps``, ``plant: 1 warning``."""
+        if not self.count:
+            return f"{self.block} {self.text}"
+        return f"{self.block}: {self.count} {self.status.lower()}{'s' if self.count > 1 else ''}"
+
+
+def _span(first: float, last: float) -> str:
+    return f"at t = {first:g} s" if last == first else f"from t = {first:g} s to {last:g} s"
+
+
+def _steps(n: int | None) -> str:
+    return f"{n} step{'' if n == 1 else 's'}"
+
+
+def message_pattern(text: str) -> str:
+    """A message with its time prefix removed and every number replaced by ``#``: what messages
+    alike share (``"joint # (elbow_joint) velocity # rad/s exceeds its limit # rad/s"``)."""
+    return _NUMBER.sub("#", _TIME_PREFIX.sub("", text))
+
+
+def status_meanings(description: str) -> dict[int, str]:
+    """The codes a ``status`` output's description names, ``"0 converged, 1 not converged (out
+    of reach?), 2 near a singularity"`` -> ``{0: "converged", 1: "not converged", ...}`` (words
+    in parentheses left out); {} where it names none."""
+    found = {}
+    for code, words in re.findall(r"(?:^|,)\s*(\d+)\s+([^,]+)", description or ""):
+        found[int(code)] = re.sub(r"\s*\([^)]*\)", "", words).strip() or words.strip()
+    return found
+
+
+def group_messages(log: list[Message], time: np.ndarray, columns: list[str], data: np.ndarray,
+                   meanings: dict[str, dict[int, str]] | None = None) -> list[MessageGroup]:
+    """What the FMUs of a run said, grouped, with the excursions their health outputs recorded.
+
+    Messages of one block with one status and one :func:`message_pattern` make one group. A
+    message logged at a point where a recorded health output of its block (:data:`HEALTH`) is
+    off starts an excursion lasting until that output is back (a block warns once per
+    excursion): the group counts those points (``steps``) and ends with them. Recorded points
+    where a health output is off that no message started make a group of their own (``count``
+    0), e.g. an IK's ``status`` other than 0.
+
+    Parameters
+    ----------
+    log : list of Message
+        In the order logged.
+    time : ndarray, shape (k,)
+        The recorded points (s).
+    columns : list of str, length m
+    data : ndarray, shape (k, m)
+    meanings : dict, optional
+        ``"<instance>.status"`` -> its codes' words (:func:`status_meanings`).
+
+    Returns
+    -------
+    list of MessageGroup
+        Message groups in the order of their first message, then the record's groups.
+    """
+    meanings = meanings or {}
+    time = np.asarray(time, dtype=float)
+    health = {}                                   # column -> (block, off: bool array)
+    for j, column in enumerate(columns):
+        block, _, name = column.partition(".")
+        if name in HEALTH and len(time):
+            health[column] = (block, data[:, j] != HEALTH[name])
+    covered = {column: np.zeros(len(time), dtype=bool) for column in health}
+    groups: dict[tuple[str, str, str], dict] = {}
+    for message in log:
+        key = (message.block, message.status, message_pattern(message.text))
+        group = groups.setdefault(key, {"first": message, "count": 0, "last": message.time,
+                                        "rows": np.zeros(len(time), dtype=bool), "signals": []})
+        group["count"] += 1
+        group["last"] = max(group["last"], message.time)
+        k = int(np.searchsorted(time, message.time - 1e-9 * max(1.0, abs(message.time))))
+        for column, (block, off) in health.items():
+            if block != message.block or k >= len(time) or not off[k]:
+                continue
+            back = np.flatnonzero(~off[k:])
+            end = k + int(back[0]) if back.size else len(time)
+            group["rows"][k:end] = True
+            covered[column][k:end] = True
+            if column not in group["signals"]:
+                group["signals"].append(column)
+    found = []
+    for (block, status, _), group in groups.items():
+        first, rows = group["first"], group["rows"]
+        last = max(group["last"], float(time[np.flatnonzero(rows)[-1]])) if rows.any() else group["last"]
+        found.append(MessageGroup(block, status, _TIME_PREFIX.sub("", first.text), group["count"], first.time,
+                                  last, group["last"], int(rows.sum()) if group["signals"] else None,
+                                  tuple(group["signals"])))
+    for column, (block, off) in health.items():
+        alone = off & ~covered[column]
+        if not alone.any():
+            continue
+        rows = np.flatnonzero(alone)
+        name = column.partition(".")[2]
+        if name == "status":
+            j = columns.index(column)
+            codes, counts = np.unique(data[rows, j], return_counts=True)
+            words = meanings.get(column, {})
+            text = ", ".join(f"{words.get(int(c), 'status') if float(c).is_integer() else 'status'} "
+                             f"(status {c:g}, {_steps(int(n))})"
+                             for c, n in sorted(zip(codes, counts), key=lambda cn: -cn[1]))
+        else:
+            text = f"{name} false"
+        found.append(MessageGroup(block, "", text, 0, float(time[rows[0]]), float(time[rows[-1]]), None,
+                                  len(rows), (column,)))
+    return found
 
 
 @dataclass
@@ -36,6 +246,12 @@ class Result:
         Unit of each column that has one (the FMU variable's ``unit``, else its declared
         type's), e.g. ``{"plant.q[2]": "rad"}``; columns without a unit are absent. May be
         empty (a result read from CSV, or from a runner that knows no units).
+    log : list of Message
+        Every message the FMUs logged during the run (warnings and errors; debug messages too
+        where the master was asked for them), in order; empty from other runners and files.
+    messages : list of MessageGroup
+        :attr:`log` grouped with the record's excursions (:func:`group_messages`): what the
+        FMUs said, e.g. ``ik: not converged (status 1, 2670 steps) from t = 0.33 s to 3 s, ...``.
     """
 
     time: np.ndarray
@@ -43,6 +259,8 @@ class Result:
     data: np.ndarray
     info: dict = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
+    log: list[Message] = field(default_factory=list)
+    messages: list[MessageGroup] = field(default_factory=list)
 
     def __getitem__(self, name: str) -> np.ndarray:
         """One recorded signal, shape (n,)."""

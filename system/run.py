@@ -15,6 +15,15 @@ mistake with a :class:`UsageError` (a ValueError) in one line naming the option,
 The output folder is replaced whole (:mod:`robofmu.system.usage`). A run that fails or is
 interrupted (Ctrl-C) is swapped in too: ``results.csv`` with the points recorded so far and a
 ``report.md`` saying where it stopped.
+
+**What the FMUs said.** Every warning and error the FMUs log is kept with the communication
+point it arrived at (:attr:`Master.heard`) and grouped with the excursions the record shows
+(:func:`robofmu.system.result.group_messages`: an IK's ``status`` other than 0, a ``reachable``
+or ``within_limits`` that is false). ``report.md`` begins with them (:func:`said_section`, with
+the joints the record shows beyond their limits: :func:`robofmu.system.analysis.limit_excursions`),
+``run.log`` holds every message, one per line, and :attr:`Run.troubles` says in a few words what
+was not respected (the summary line, ``robofmu run --strict``). A ``--set`` of a trajectory or IK
+parameter repeats the build's reference check first (:func:`reference_check`).
 """
 from __future__ import annotations
 
@@ -24,12 +33,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from robofmu.system import analysis, experiment
-from robofmu.system.diagram import System
+from robofmu.system.diagram import System, parameter_address
 from robofmu.system.master import DiagramError, Interrupted, Master, Result, SimulationError
 from robofmu.system.roles import Roles, check_roles
 from robofmu.system.usage import OutputFolder, UsageError, check_fmu_folder, check_times, times_given, timing
 
-__all__ = ["Run", "figures_of", "progress_printer", "run_experiment"]
+__all__ = ["Run", "figures_of", "progress_printer", "reference_check", "run_experiment", "said_section",
+           "summary_line"]
 
 
 def progress_printer(label: str, stream=sys.stderr):
@@ -51,12 +61,34 @@ def progress_printer(label: str, stream=sys.stderr):
 
 @dataclass
 class Run:
+    """A finished run of :func:`run_experiment`.
+
+    Attributes
+    ----------
+    name : str
+    result : Result
+        Its ``messages`` are what the FMUs said, grouped.
+    roles : Roles
+    metrics : Tracking
+    section : str
+        The report's tracking section (markdown).
+    figures : list of Path
+    said : list of str
+        The lines of the report's "What the FMUs said" ([] where nothing was said): the
+        message groups, then the joints the record shows beyond their limits.
+    troubles : list of str
+        What the run did not respect, a few words each (the FMUs' messages, an IK's status,
+        a joint beyond its limits, a refused reference check); [] for a clean run.
+    """
+
     name: str
     result: Result
     roles: Roles
     metrics: analysis.Tracking
     section: str
     figures: list[Path]
+    said: list[str]
+    troubles: list[str]
 
 
 def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]) -> list[Path]:
@@ -95,8 +127,99 @@ def _check_memory(system: System, master: Master, n: int, step: float | None, st
                          "shorter --stop-time")
 
 
-def _short_report(name: str, text: str) -> str:
-    return f"# {name}\n\n{text}\n"
+def _short_report(name: str, text: str, said: list[str] | None = None) -> str:
+    return f"# {name}\n\n" + (said_section(said) if said else "") + f"{text}\n"
+
+
+def said_section(said: list[str]) -> str:
+    """The report's first section (markdown): "What the FMUs said", one item per line of ``said``
+    (:attr:`Run.said`), or that they said nothing."""
+    items = "\n".join(f"- {line}" for line in said) if said else \
+        "Nothing: no warning or error, every health output recorded stayed fine, every joint within its limits."
+    return f"## What the FMUs said\n\n{items}\n\nEvery message, one per line: [run.log](run.log).\n\n"
+
+
+def summary_line(name: str, result: Result, troubles: list[str]) -> str:
+    """``ur5-pose: done, 3000 steps to t = 3 s in 2.9 s`` and, where the run did not respect
+    something, `` — WARNING: `` and :attr:`Run.troubles`."""
+    steps = len(result.time) - 1
+    line = (f"{name}: done, {steps} step{'' if steps == 1 else 's'} to t = {result.time[-1]:g} s "
+            f"in {result.info.get('wall_time', float('nan')):.1f} s")
+    return line + (" — WARNING: " + "; ".join(troubles) if troubles else "")
+
+
+def _run_log(result: Result | None) -> str:
+    return "".join(f"{message}\n" for message in (result.log if result is not None else []))
+
+
+def reference_check(system: System, master: Master, parameters: dict, step: float) -> str | None:
+    """The build's reference check (:func:`robofmu.components.preflight.check_reference`)
+    repeated where ``parameters`` (``--set``) change a trajectory or IK block of the experiment's
+    robot: the robot's description with those blocks' parameters as the run sets them
+    (the experiment's, then ``parameters``), sampled at ``step`` (s).
+
+    Returns
+    -------
+    str or None
+        The check's refusal (the joint, the limit, the time); None where it passes or nothing
+        was changed that it checks (or it cannot check: a robot it cannot read, a value it
+        cannot place).
+    """
+    from dataclasses import replace
+
+    from robofmu.components.blocks import make_block
+    from robofmu.components.preflight import ReferenceRefused, check_reference
+    from robofmu.components.robots import load_description
+    from robofmu.components.robots.description import PROFILE_PREFIX, Choice
+    from robofmu.system.fmu import block_identity
+
+    robot = system.extra.get("robot")
+    touched = {parameter_address(name)[0] for name in parameters}
+    kinds = {}
+    for name in master.order:
+        try:
+            identity = block_identity(master.nodes[name].path)
+        except ValueError:
+            continue
+        if identity["kind"] in ("trajectory", "ik") and identity["robot"]:
+            kinds[name] = identity
+    if not robot or not touched & set(kinds):
+        return None
+    try:
+        description = load_description(robot)
+        for name, identity in kinds.items():
+            table = identity["kind"]
+            profile = identity.get("profile", "")
+            _, _, described = description.block_of(f"{PROFILE_PREFIX}{profile}" if profile else table)
+            choice = getattr(described, table)
+            if choice is None:
+                continue
+            block = make_block(described, table)
+            declared = {v.name for v in block.variables if v.causality == "parameter"}
+            given = dict(choice.parameters)
+            for key, value in master.nodes[name].spec.parameters.items():
+                if isinstance(value, str):
+                    continue
+                base, bracket, rest = key.partition("[")
+                size = sum(1 for v in declared if v.startswith(base + "["))
+                if bracket:
+                    current = given.get(base)
+                    if not isinstance(current, (list, tuple)) or len(current) != size:
+                        current = [block.get(f"{base}[{k + 1}]") for k in range(size)]
+                    current = list(current)
+                    current[int(rest[:-1]) - 1] = value
+                    given[base] = current
+                elif size:
+                    given[base] = [value] * size
+                elif key in declared:
+                    given[key] = value
+            description = replace(description, **{table: Choice(choice.kind, given)})
+        check_reference(description, step)
+    except ReferenceRefused as exc:
+        return str(exc)
+    except (ValueError, KeyError, IndexError):
+        return None
+    return None
 
 
 def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus", step: float | None = None,
@@ -132,6 +255,8 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     Returns
     -------
     Run
+        With what the FMUs said (:attr:`Run.said`, also first in ``report.md`` and whole in
+        ``run.log``) and what the run did not respect (:attr:`Run.troubles`).
 
     Raises
     ------
@@ -168,6 +293,11 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     _check_memory(system, master, n, step, stop_time)
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
+    refused = reference_check(system, master, parameters, h) if parameters else None
+    if refused:
+        settings = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in parameters.items())
+        print(f"warning: --set {settings}: the build's reference check refuses the reference: {refused}",
+              file=sys.stderr)
     out = folder.open()
     final = folder.path if folder.given.is_absolute() else folder.given
     try:
@@ -180,13 +310,15 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
                 raise type(exc)(f"{exc.reason} (nothing recorded; {final} untouched)", exc.block, exc.time, kept,
                                 exc.reason) from None
             kept.write(out / results)
+            if kept.log:
+                (out / "run.log").write_text(_run_log(kept))
             points = f"{results} holds the {len(kept.time)} points up to t = {kept.time[-1]:.9g} s"
             if isinstance(exc, Interrupted):
                 how = "" if "KeyboardInterrupt" in exc.reason else " (SIGINT)"
                 text = f"Interrupted{how} {exc.reason.removeprefix('interrupted ')}; {points}; no figures."
             else:
                 text = f"The run failed: {' '.join(exc.reason.split())}\n\n{points}; no figures."
-            (out / "report.md").write_text(_short_report(system.name, text))
+            (out / "report.md").write_text(_short_report(system.name, text, [str(g) for g in kept.messages]))
             folder.commit()
             where = (f"; results up to t = {kept.time[-1]:.9g} s in {final / results} "
                      f"(report: {final / 'report.md'})")
@@ -198,6 +330,11 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
             reason = "interrupted while writing the complete results"
             raise Interrupted(f"{reason}; {final} untouched (the exception's result holds them)", None,
                               float(result.time[-1]), result, reason) from None
+        (out / "run.log").write_text(_run_log(result))
+        excursions = analysis.limit_excursions(result, roles)
+        said = [str(g) for g in result.messages] + [line for line, _ in excursions]
+        troubles = ([g.short() for g in result.messages] + [words for _, words in excursions]
+                    + (["the build's reference check refuses the --set reference"] if refused else []))
         try:
             metrics = analysis.tracking_metrics(result, roles)
             section = analysis.tracking_report(system.name, system.description, metrics, result)
@@ -210,11 +347,11 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
             raise Interrupted(f"interrupted while writing the report and figures; the complete results are "
                               f"in {final / results}", None, float(result.time[-1]), result,
                               "interrupted while writing the report and figures") from None
-        (out / "report.md").write_text(f"# {system.name}\n\n" + section + "\n\n"
+        (out / "report.md").write_text(f"# {system.name}\n\n" + said_section(said) + section + "\n\n"
                                        + "\n".join(f"![{p.stem}]({p.name})" for p in made) + "\n")
         folder.commit()
     except BaseException:
         folder.discard()               # nothing written yet, or already committed
         raise
     made = [final / p.name for p in made]
-    return Run(system.name, result, roles, metrics, section, made)
+    return Run(system.name, result, roles, metrics, section, made, said, troubles)

@@ -6,7 +6,15 @@ file or key, before the first FMU is instantiated:
 - the FMU folder (``--fmus``): missing, an FMU missing, or built from other robofmu sources
   than this process runs (each says ``robofmu build``);
 - ``--step-size`` / ``--stop-time``: finite and > 0, the stop time a whole number of steps;
-- ``--out``: a folder (or file) that can be created, or replaced (:class:`OutputFolder`).
+- ``--out``: a folder (or file) that can be created, or replaced (:class:`OutputFolder`), tried
+  by creating a file there (root may write where permissions say no, and nobody in /proc);
+- a count the user gives (samples, grid points, steps): its memory, before it is allocated
+  (:func:`check_memory`: at most half the memory available, the rule ``robofmu run`` applies).
+
+**Files are written atomically** (:func:`atomic_file`): into a temporary sibling
+``.<name>.<random>.partial``, renamed over the file at the end, so an interrupted or failed write
+leaves the earlier file or none. An existing file is replaced only if it is an output of the
+same kind (:func:`check_replaceable`): ``robofmu ssp --out notes.txt`` never overwrites the notes.
 
 **Output folders are replaced whole.** A command writes into a temporary sibling folder
 (``.<name>.robofmu-XXXX`` beside ``--out``) and swaps it in for ``--out`` at the end, so the
@@ -22,15 +30,20 @@ import math
 import os
 import shutil
 import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 from robofmu.system.check import step_count
 from robofmu.system.diagram import System
 
-__all__ = ["OUTPUTS", "OutputFolder", "Outputs", "UsageError", "check_fmu_folder", "check_times", "check_writable",
-           "default_out", "export_experiment", "one_line", "owned_by", "say", "stopped", "times_given", "timing"]
+__all__ = ["OUTPUTS", "PARTIAL", "OutputFolder", "Outputs", "UsageError", "atomic_file", "check_fmu_folder",
+           "check_memory", "check_replaceable", "check_times", "check_writable", "default_out", "export_experiment",
+           "one_line", "owned_by", "say", "stopped", "times_given", "timing"]
+
+#: How the temporary sibling of a file being written ends (:func:`atomic_file`).
+PARTIAL = ".partial"
 
 
 @dataclass(frozen=True)
@@ -56,7 +69,7 @@ class Outputs:
 #: The outputs of each command that writes a folder: the one statement of which existing folders
 #: it may replace (``run``, ``workspace``, ``convergence``, ``demo``) or continue (``sweep``).
 OUTPUTS = {
-    "run": Outputs(("results.csv", "results.parquet", "report.md", "*.png")),
+    "run": Outputs(("results.csv", "results.parquet", "report.md", "run.log", "*.png")),
     "sweep": Outputs(("sweep.json", "sweep.csv", "sweep.csv.tmp", "sweep.parquet", "sweep.parquet.tmp",
                       "report.md", "*.png"), folders=("runs",)),
     "workspace": Outputs(("*.md", "*.png")),
@@ -185,7 +198,8 @@ class OutputFolder:
 def check_writable(path: str | Path, option: str, file: bool = False) -> None:
     """Refuse (:class:`UsageError` naming ``option``) a folder (or with ``file``, a file) that
     cannot be written: a file where a folder is needed (or a folder where a file is), a parent
-    that is a file, no write permission. Missing parents are fine (they will be created)."""
+    that is a file, a name too long, no write permission, or a place where no file can be created
+    (tried: :func:`_probe`). Missing parents are fine (they will be created)."""
     given = Path(path)
     path = Path(os.path.realpath(given))
     if path.exists():
@@ -195,6 +209,9 @@ def check_writable(path: str | Path, option: str, file: bool = False) -> None:
             raise UsageError(f"{option} {given}: exists and is a file, not a folder")
         if not os.access(path, os.W_OK | (0 if file else os.X_OK)):
             raise UsageError(f"{option} {given}: no write permission")
+        problem = _probe(path.parent if file else path)
+        if problem:
+            raise UsageError(f"{option} {given}: cannot write there: {problem}")
         return
     ancestor = path.parent
     while not ancestor.exists():
@@ -203,6 +220,85 @@ def check_writable(path: str | Path, option: str, file: bool = False) -> None:
         raise UsageError(f"{option} {given}: {ancestor} is a file, not a folder")
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise UsageError(f"{option} {given}: cannot create it: no write permission in {ancestor}")
+    try:
+        longest = os.pathconf(ancestor, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        longest = 255
+    if any(len(os.fsencode(part)) > longest for part in path.relative_to(ancestor).parts):
+        raise UsageError(f"{option} {given}: a name in it is longer than {longest} bytes")
+    problem = _probe(ancestor)
+    if problem:
+        raise UsageError(f"{option} {given}: cannot create it in {ancestor}: {problem}")
+
+
+def _probe(folder: Path) -> str | None:
+    """Why no file can be created in ``folder`` (an existing folder), or None: creates and deletes
+    one (``os.access`` answers yes to root on a read-only file system or in /proc)."""
+    try:
+        fd, name = tempfile.mkstemp(dir=folder, prefix=".robofmu-probe.", suffix=PARTIAL)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    os.close(fd)
+    os.unlink(name)
+    return None
+
+
+@contextmanager
+def atomic_file(path: str | Path) -> Iterator[Path]:
+    """Write a file atomically: yields a temporary sibling ``.<name>.<random>.partial`` (created
+    empty, in the same folder: parents are created) to write to, renamed over ``path`` when the
+    block ends; on any exception (Ctrl-C too) it is deleted, so ``path`` stays as it was or absent.
+
+    A symbolic link at ``path`` is followed: its target is replaced. The file gets the mode of
+    the file it replaces, else the one a new file gets (0666 less the umask).
+    """
+    path = Path(os.path.realpath(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=PARTIAL)
+    os.close(fd)
+    partial = Path(name)
+    try:
+        yield partial
+        if path.is_file():
+            mode = path.stat().st_mode & 0o7777
+        else:
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask
+        os.chmod(partial, mode)                 # mkstemp makes it 0o600
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)
+
+
+def check_replaceable(path: str | Path, option: str, owned: Callable[[Path], bool], what: str) -> None:
+    """Refuse (:class:`UsageError` naming ``option`` and the file) to replace an existing file
+    that is not an output of the same kind: ``owned(path)`` says whether it is (``what`` names
+    the kind in the message: ``"an SSP package robofmu wrote"``)."""
+    given = Path(path)
+    path = Path(os.path.realpath(given))
+    if not path.is_file():
+        return
+    try:
+        mine = owned(path)
+    except Exception:                  # not a zip, unreadable: not ours
+        mine = False
+    if not mine:
+        raise UsageError(f"{option} {given}: exists and is not {what}; it is not replaced: give a new file name "
+                         "or remove it first")
+
+
+def check_memory(need: int, where: str, fix: str) -> None:
+    """Refuse (:class:`UsageError`) an allocation of ``need`` bytes that would take more than half
+    the memory available (:func:`robofmu.system.master.available_memory`), the rule ``robofmu run``
+    applies to its recording; the message names ``where`` (the option or file and key) and says
+    what to do (``fix``)."""
+    from robofmu.system.master import _gigabytes, available_memory
+
+    free = available_memory()
+    if free is not None and need > free / 2:
+        raise UsageError(f"{where}: needs {_gigabytes(need)} of memory, more than half of the {_gigabytes(free)} "
+                         f"available; {fix}")
 
 
 def check_times(step: float | None, stop_time: float | None) -> None:
@@ -332,23 +428,31 @@ def default_out(experiment: str, suffix: str = "") -> Path:
     return Path(defaults.RESULTS_FOLDER) / f"{name}{suffix}"
 
 
-def export_experiment(command: str, experiment: str, out: str | None, fmu_dir, suffix: str, write) -> int:
+def export_experiment(command: str, experiment: str, out: str | None, fmu_dir, suffix: str, write,
+                      owned: Callable[[Path], bool], what: str) -> int:
     """Load ``experiment``, check the output file and the FMU folder, then ``write(system, path)``;
     print the path written and return the exit status. The one shape of ``robofmu ssp`` and
-    ``robofmu container``."""
+    ``robofmu container``.
+
+    An existing output file is replaced only where ``owned(path)`` says it is an output of this
+    kind (``what``: :func:`check_replaceable`). A file that cannot be written is a mistake in
+    what was asked (exit status 2), as every refusal before anything is written.
+    """
     from robofmu.system.experiment import load
 
     given = out
+    option = "--out" if given else "the default output"
     try:
         system = load(experiment, fmu_dir=fmu_dir)
         out = Path(given or f"{system.name}{suffix}")
-        check_writable(out, "--out" if given else "the default output", file=True)
+        check_writable(out, option, file=True)
+        check_replaceable(out, option, owned, what)
         check_fmu_folder(system)
         written = write(system, out)
     except ValueError as exc:          # UsageError, ExperimentError, DiagramError, a tool's refusal
         return stopped(command, exc)
     except OSError as exc:
-        say(command, f"cannot write {out}: {exc.strerror or exc}")
-        return 1
+        say(command, f"{option} {out}: cannot write it: {exc.strerror or exc}")
+        return 2
     print(written)
     return 0

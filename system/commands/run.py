@@ -1,6 +1,14 @@
-"""``robofmu run``: one experiment, its results, figures and report."""
+"""``robofmu run``: one experiment, its results, figures and report.
+
+After the run, what the FMUs said (their warnings and errors, grouped with counts and first and
+last times, and the excursions the record shows: an IK's status other than 0, a joint beyond its
+limits) is printed on stderr, one line each; ``report.md`` begins with it and ``run.log`` holds
+every message. The last line is the run's summary; a run whose IK or limits were not respected
+says so there (``— WARNING: ...``), and with ``--strict`` it exits with status 1.
+"""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from robofmu.system import options
@@ -19,7 +27,10 @@ def add_parser(subparsers):
                     "the run (written in a temporary sibling folder, then swapped in), so no earlier output "
                     "stays beside new results; a folder holding other files than a run's outputs is refused. "
                     "Ctrl-C stops at the next communication point and writes the results so far (exit status "
-                    "130). An experiment file may name a packaged experiment as its base. "
+                    "130). What the FMUs said (warnings and errors, grouped) is printed on stderr after the run, "
+                    "first in report.md and whole in DIR/run.log; the summary line ends with '— WARNING: ...' "
+                    "where the IK or the joints' limits were not respected (exit status 1 with --strict). "
+                    "An experiment file may name a packaged experiment as its base. "
                     f"Experiments: {', '.join(available())}.")
     p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
     options.add_out(p, "output folder, replaced whole (default: results/EXPERIMENT)")
@@ -31,13 +42,17 @@ def add_parser(subparsers):
                    help="set a block parameter over the experiment's (repeatable), e.g. controller.kp=400")
     p.add_argument("--format", choices=["csv", "parquet"], default="csv",
                    help="results.csv (default) or results.parquet: binary, exact, with units; for large runs")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with status 1 when the run did not respect its IK or limits: an FMU warning or "
+                        "error, an IK status other than 0, a joint beyond its limits, or a --set reference the "
+                        "build's check refuses (the results are written all the same)")
     p.set_defaults(func=main)
     return p
 
 
 def main(args) -> int:
     from robofmu.system.master import SimulationError
-    from robofmu.system.run import run_experiment
+    from robofmu.system.run import run_experiment, summary_line
 
     out = Path(args.out) if args.out else default_out(args.experiment)
     try:
@@ -47,6 +62,12 @@ def main(args) -> int:
                              results_format=args.format)
     except (SimulationError, ValueError) as exc:      # ValueError: UsageError, ExperimentError, DiagramError
         return stopped("run", exc)
+    if run.said:
+        print(f"What the FMUs said ({run.name}; every message in {out / 'run.log'}):", file=sys.stderr)
+        for line in run.said:
+            print(f"  {line}", file=sys.stderr)
     print(run.section)
-    print(f"\nwrote {out / ('results.' + args.format)}, {out / 'report.md'} and {len(run.figures)} figures in {out}")
-    return 0
+    print(f"\nwrote {out / ('results.' + args.format)}, {out / 'report.md'}, {out / 'run.log'} and "
+          f"{len(run.figures)} figures in {out}")
+    print(summary_line(run.name, run.result, run.troubles))
+    return 1 if args.strict and run.troubles else 0

@@ -14,6 +14,10 @@ Exit status and messages, for every command:
 
 ``robofmu sweep`` exits 0 when every run has a row, failed runs included: a run that fails is a
 finding of the sweep (a row with its status and message), not a failure of the command.
+
+A run that completes but did not respect its IK or limits (an FMU warning or error, an IK
+status other than 0, a joint beyond its limits) exits 0 with ``— WARNING: ...`` in its summary
+line, what the FMUs said printed on stderr; ``robofmu run --strict`` makes it exit 1.
 """
 from __future__ import annotations
 

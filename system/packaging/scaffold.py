@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["MARK", "Chain", "NoDemonstration", "Plan", "Posture", "ScaffoldError", "choose_chain", "describe_move", "plan",
-           "posture", "resolve_file", "rule_home", "singular_value", "tool_leaves", "write_files"]
+           "chain_model", "first_move", "posture", "resolve_file", "rule_home", "singular_value", "tool_leaves", "write_files"]
 
 #: The first line of every file ``robofmu new`` writes: such a file it may replace.
 MARK = "# Written by robofmu new"
@@ -53,6 +53,8 @@ SIGMA_FACTOR = 2.5
 SAMPLES, REFINEMENTS, SEED = 3000, 300, 0
 #: The first demonstration move: its length over the reach, its turn (rad), its duration (s).
 MOVE, ROTATION, DURATION = 0.1, math.pi / 6, 2.0
+#: The closest a joint of the accepted move may come to a position limit (rad or m).
+GAP = 0.01
 #: Halvings of the move and doublings of its duration tried before giving up.
 SHRINKS, SLOWDOWNS = 5, 3
 #: Computed-torque gains at this natural frequency (rad/s), critically damped.
@@ -137,7 +139,9 @@ def tool_leaves(urdf) -> dict[str, tuple[str, ...]]:
 
 
 def _leaf_list(leaves: dict[str, tuple[str, ...]], most: int = 12) -> str:
-    shown = [f"{leaf} ({len(joints)} joints)" for leaf, joints in list(leaves.items())[:most]]
+    """The leaves, those with the most joints first, at most ``most`` of them."""
+    ranked = sorted(leaves.items(), key=lambda item: -len(item[1]))
+    shown = [f"{leaf} ({len(joints)} joint{'s' * (len(joints) != 1)})" for leaf, joints in ranked[:most]]
     more = f" and {len(leaves) - most} more (robofmu inspect lists them)" if len(leaves) > most else ""
     return ", ".join(shown) + more
 
@@ -383,6 +387,33 @@ def _move(robot, home, pose: bool, length: float, scale: float, duration: float)
             "v_max": 1.5 * distance / duration, "a_max": 4.5 * distance / duration ** 2}
 
 
+def first_move(pose: bool) -> dict:
+    """A ``[trajectory]`` table that stands still, for a model loaded before its move is chosen."""
+    if pose:
+        return {"profile": "pose_line", "displacement": [0.0, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0],
+                "duration": DURATION}
+    return {"profile": "line", "start": [0.0, 0.0, 0.0], "direction": [1.0, 0.0, 0.0], "length": 1.0,
+            "v_max": 1.0, "a_max": 1.0}
+
+
+def chain_model(urdf, chain: Chain, xacro_args: dict | None = None):
+    """The serial robot model (Pinocchio's, through the robot description) of ``chain`` of the
+    checked URDF ``urdf``: its task the tool's pose from six joints, else its position. ValueError
+    naming the URDF where the model refuses it."""
+    from robofmu.components.robots import load_model
+    from robofmu.components.robots.description import read
+
+    pose = len(chain.joints) >= 6
+    with tempfile.TemporaryDirectory(prefix="robofmu-inspect-") as folder:
+        path = Path(folder) / "inspected.toml"
+        path.write_text(_robot_text("inspected", [], "inspected", str(urdf.path), dict(xacro_args or {}), None, chain,
+                                    pose, [0.0] * len(chain.joints), first_move(pose)))
+        try:
+            return load_model(read(path))
+        except ValueError as exc:
+            raise ScaffoldError(_own_words(exc, folder, "inspected", urdf.path)) from None
+
+
 def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = None,
          srdf: tuple[Path, object] | None = None, xacro_args: dict | None = None) -> Plan:
     """Choose the chain, home, task and move of robot ``name`` from its URDF, check them as
@@ -440,6 +471,7 @@ def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = No
     if srdf is not None:
         srdf_ref = srdf[1] if not isinstance(srdf[1], str) else os.path.relpath(srdf[0], out.resolve())
     placeholder = [0.0] * n
+    target = out / f"{name}.toml"
 
     with tempfile.TemporaryDirectory(prefix="robofmu-new-") as folder:
         def describe(home, trajectory, header=()):
@@ -452,14 +484,11 @@ def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = No
         what = f"pose of {chain.tool}" if pose else f"position of {chain.tool}"
         locked = f", {len(chain.locked)} joints locked" if chain.locked else ""
         summary = f"{urdf.name} ({urdf_path.name}): {n} joints {chain.base} -> {chain.tool}{locked}: {what}"
-        first = {"profile": "pose_line", "displacement": [0.0, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0],
-                 "duration": DURATION} if pose else {
-            "profile": "line", "start": [0.0, 0.0, 0.0], "direction": [1.0, 0.0, 0.0], "length": 1.0,
-            "v_max": 1.0, "a_max": 1.0}
+        first = first_move(pose)
         try:
             robot = load_model(describe(placeholder, first))
         except ValueError as exc:
-            raise ScaffoldError(_own_words(exc, folder, name, urdf_path)) from None
+            raise ScaffoldError(_own_words(exc, folder, name, target)) from None
         length = reach(robot)
         notes = []
         sigma_floor = SIGMA_FACTOR * singular_value()
@@ -494,16 +523,20 @@ def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = No
             trajectory = _move(robot, home.q, pose, length, scale, duration)
             try:
                 check = check_reference(describe(home_value, trajectory))
-                break
+                if check.position_margin >= GAP:
+                    break
+                refusal = (f"a joint comes within {check.position_margin:.3g} of a position limit (less than "
+                           f"{GAP:g})")
             except ReferenceRefused as exc:
-                tries.append(f"{describe_move(trajectory, duration)}: {exc}")
-                if "velocity" in str(exc) and duration < DURATION * 2 ** SLOWDOWNS:
-                    duration *= 2.0
-                elif scale > 0.5 ** SHRINKS:
-                    scale /= 2.0
-                else:
-                    raise NoDemonstration(f"no demonstration move passes the build's reference check after "
-                                          f"{len(tries)} tries; the last: {tries[-1]}") from None
+                refusal = _own_words(exc, folder, name, target)
+            tries.append(f"{describe_move(trajectory, duration)}: {refusal}")
+            if "velocity" in refusal and duration < DURATION * 2 ** SLOWDOWNS:
+                duration *= 2.0
+            elif scale > 0.5 ** SHRINKS:
+                scale /= 2.0
+            else:
+                raise NoDemonstration(f"no demonstration move passes the build's reference check after "
+                                      f"{len(tries)} tries; the last: {tries[-1]}")
         if tries:
             notes.append(f"{len(tries)} larger or faster moves refused by the reference check, the first: {tries[0]}")
         move_time = duration
@@ -531,9 +564,9 @@ def describe_move(trajectory: dict, duration: float) -> str:
     return f"the tool moves {trajectory['length'] * 1000:.4g} mm in a straight line in {duration:g} s"
 
 
-def _own_words(exc: Exception, folder: str, name: str, urdf_path: Path) -> str:
-    """A model's refusal with the temporary TOML's path replaced by what the user gave."""
-    return " ".join(str(exc).replace(str(Path(folder) / f"{name}.toml"), str(urdf_path)).split())
+def _own_words(exc: Exception, folder: str, name: str, target: Path) -> str:
+    """A model's refusal with the temporary TOML's path replaced by the TOML's own."""
+    return " ".join(str(exc).replace(str(Path(folder) / f"{name}.toml"), str(target)).split())
 
 
 # -- writing ------------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-__all__ = ["SOURCE_HASH", "STEP_SIZE", "code_files", "source_hash", "robot_data_hash", "check_bundle"]
+__all__ = ["SOURCE_HASH", "STEP_SIZE", "code_files", "source_hash", "robot_data_hash", "description_hash", "check_bundle"]
 
 #: The communication step (s) of every FMU's default experiment, and of an experiment that names
 #: none (``robofmu.system.defaults.STEP_SIZE`` is this): 1 ms.
@@ -76,23 +76,39 @@ def source_hash(package_dir: str | Path) -> str:
 SOURCE_HASH = source_hash(_PACKAGE_DIR)
 
 
-def robot_data_hash(toml: str | Path, urdf: str | Path | None = None, tables=()) -> str:
+def robot_data_hash(toml: str | Path, urdf: str | Path | None = None, tables=(), srdf: str | Path | None = None,
+                    xacro_args: dict | None = None) -> str:
     """SHA-256 over one robot's data, hex: its TOML's bytes, then its URDF's (None: a closed-chain
-    mechanism, described by its TOML alone), then each CSV table a profile reads (``tables``:
-    paths relative to the TOML, in the description's order). File names and folders do not
-    count, so the robot's files where they are described (a URDF perhaps in another
-    distribution) and the copies an FMU carries (``resources/robot/<name>.toml``, ``<name>.urdf``,
-    the tables beside them) hash alike."""
+    mechanism, described by its TOML alone; a ``.xacro`` file: the URDF it expands to with
+    ``xacro_args``), then its SRDF's (``srdf``, if any), then each CSV table a profile reads
+    (``tables``: paths relative to the TOML, in the description's order). File names and folders
+    do not count, so the robot's files where they are described (a URDF perhaps in another
+    distribution, a xacro file) and the copies an FMU carries (``resources/robot/<name>.toml``,
+    ``<name>.urdf`` expanded, ``<name>.srdf``, the tables beside them) hash alike."""
     digest = hashlib.sha256()
     digest.update(b"toml\0")
     digest.update(Path(toml).read_bytes())
     if urdf is not None:
         digest.update(b"\0urdf\0")
-        digest.update(Path(urdf).read_bytes())
+        if Path(urdf).suffix == ".xacro":
+            from .robots.urdf import expand_xacro
+
+            digest.update(expand_xacro(urdf, xacro_args))
+        else:
+            digest.update(Path(urdf).read_bytes())
+    if srdf is not None:
+        digest.update(b"\0srdf\0")
+        digest.update(Path(srdf).read_bytes())
     for table in tables:
         digest.update(b"\0table\0" + str(table).encode() + b"\0")
         digest.update((Path(toml).parent / table).read_bytes())
     return digest.hexdigest()
+
+
+def description_hash(description) -> str:
+    """:func:`robot_data_hash` of a :class:`~robofmu.components.robots.RobotDescription`."""
+    return robot_data_hash(description.path, description.urdf, description.tables, description.srdf,
+                           description.xacro_args)
 
 
 def check_bundle(resources: str | Path) -> None:

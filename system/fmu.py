@@ -322,7 +322,7 @@ def stale_reasons(path: str | Path, robot=None) -> list[str]:
     """
     from importlib import metadata
 
-    from robofmu.components import SOURCE_HASH, robot_data_hash
+    from robofmu.components import SOURCE_HASH, description_hash
     from robofmu.components.robots import available, load_description
 
     root = _model_description(path)
@@ -341,6 +341,6 @@ def stale_reasons(path: str | Path, robot=None) -> list[str]:
     if robot is not None:
         if robot.name != identity.get("robot"):
             reasons.append(f"built for robot {identity.get('robot')!r}, not {robot.name!r}")
-        elif "robot_data" in identity and identity["robot_data"] != robot_data_hash(robot.path, robot.urdf, robot.tables):
+        elif "robot_data" in identity and identity["robot_data"] != description_hash(robot):
             reasons.append("robot data changed")
     return reasons

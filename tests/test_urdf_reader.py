@@ -423,3 +423,29 @@ def test_a_fmu_carries_the_expanded_urdf_and_the_srdf_and_reads_the_same_robot(t
     q = np.array([0.2, -0.3])
     assert np.array_equal(mine.pose(q).homogeneous, theirs.pose(q).homogeneous)
     assert np.array_equal(mine.mass_matrix(q), theirs.mass_matrix(q))
+
+
+def test_the_robot_data_hash_of_a_xacro_robot_with_an_srdf_is_the_carried_copies_hash(tmp_path):
+    """The hash ``robofmu build`` compares with an FMU's (staleness) covers the URDF the xacro file
+    expands to and the SRDF: the user's files and the copies a FMU carries hash alike, and a change
+    of the SRDF or of a xacro argument changes it."""
+    from robofmu.components import description_hash
+    from robofmu.system.packaging.build import stage_robot
+
+    (tmp_path / "arm.urdf.xacro").write_text(XACRO)
+    (tmp_path / "arm.srdf").write_text(SRDF.replace('<joint name="gripper" value="0.02"/>', ""))
+    toml = _toml(tmp_path, urdf='"arm.urdf.xacro"', extra='xacro_args = { reach = 0.45 }\nsrdf = "arm.srdf"',
+                 home='"srdf:ready"')
+    user = read(toml)
+    folder = tmp_path / "resources" / "robot"
+    stage_robot(user, folder)
+    carried = read(folder / "arm.toml", urdf=folder / "arm.urdf")
+    before = description_hash(user)
+    assert description_hash(carried) == before
+    (tmp_path / "arm.srdf").write_text((tmp_path / "arm.srdf").read_text() + "\n")
+    assert description_hash(read(toml)) != before
+    (tmp_path / "arm.srdf").write_text(SRDF.replace('<joint name="gripper" value="0.02"/>', ""))
+    assert description_hash(read(toml)) == before
+    (tmp_path / "arm.urdf.xacro").write_text(XACRO.replace('name="tool_mass" default="0.2"',
+                                                           'name="tool_mass" default="0.3"'))
+    assert description_hash(read(toml)) != before           # what the xacro file expands to counts

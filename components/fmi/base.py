@@ -29,7 +29,7 @@ from xml.etree.ElementTree import Element
 from pythonfmu import Fmi2Slave
 from pythonfmu.default_experiment import DefaultExperiment
 
-from .. import SOURCE_HASH, STEP_SIZE, check_bundle, robot_data_hash
+from .. import SOURCE_HASH, STEP_SIZE, check_bundle, description_hash
 from ..blocks import block_type
 from ..robots import load_description, load_model
 from ..robots.description import read
@@ -86,7 +86,7 @@ class BlockSlave(FastPath, LifeCycle, Outputs, FmuState, Variables, Reporting, F
         if not self.robot_name or not self.block_kind:
             raise TypeError(f"{type(self).__name__}: robot_name and block_kind must be set")
         description = self._own_description()
-        self.robot_data = robot_data_hash(description.path, description.urdf, description.tables)
+        self.robot_data = description_hash(description)
         kind, self.profile, description = description.block_of(self.block_kind)   # trajectory_<profile>
         self.logic = block_type(description, kind)(load_model(description))
         self.logic.logger = self._log_from_block

@@ -266,3 +266,26 @@ def test_a_failed_run_s_partial_result_carries_the_messages(ur5_fmus, monkeypatc
     n, first, _ = excursion(kept, "ik.status", lambda v: v != 0)
     (record,) = [g for g in kept.messages if g.count == 0]
     assert (record.steps, record.first) == (n, first)
+
+
+def test_a_sweep_row_of_a_completed_run_carries_what_the_fmus_said(ur5_fmus):
+    """The sweep's worker, in process: a run with the tool sent 5 m away is ``ok`` and its message
+    holds the IK's warning group of the same run by the master; the packaged run's is empty."""
+    from robofmu.system.sweep.worker import run_one
+
+    system = experiment.load("ur5-pose", fmu_dir=ur5_fmus)
+    row = run_one(system, {"trajectory.displacement[1]": 5.0}, 0.5, None)
+    master = Master(experiment.with_parameters(system, {"trajectory.displacement[1]": 5.0}),
+                    record=experiment_roles(system))
+    master.check()
+    groups = master.run(stop_time=0.5).messages
+    assert row["status"] == "ok" and [g.block for g in groups] == ["ik", "plant"]
+    assert row["message"] == " | ".join(str(g) for g in groups)
+    assert run_one(system, {"trajectory.displacement[1]": -0.15}, 0.5, None)["message"] == ""
+
+
+def experiment_roles(system) -> list[str]:
+    """What the sweep records: the experiment's roles."""
+    from robofmu.system.roles import Roles
+
+    return Roles.of(system).signals()

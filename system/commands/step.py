@@ -213,6 +213,8 @@ def main(args) -> int:
     except (SimulationError, ValueError) as exc:     # ValueError: UsageError, DiagramError
         return stopped("step", exc)
     comparison = compare(result)
+    for group in result.messages:           # what the FMUs said: a limit crossed, ...
+        say("step", f"warning: {group}")
     if design is not None:
         print(f"design: settling time {design.settling_time:g} s, overshoot {design.overshoot:g} % -> "
               f"zeta {design.zeta:.4f}, wn {design.wn:.4f} rad/s (rule of thumb 4/(zeta Ts): "

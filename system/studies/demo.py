@@ -16,7 +16,7 @@ import numpy as np
 from robofmu.system import defaults, plots
 from robofmu.system.analysis import markdown_table
 from robofmu.system.experiment import load
-from robofmu.system.run import run_experiment
+from robofmu.system.run import run_experiment, summary_line
 from robofmu.system.studies.plan import (AccuracyStudy, ExperimentSection, InteropSection, RobustnessStudy,
                                          StepResponses, WorkspaceEntry, read_plan)
 from robofmu.system.studies.replica import InProcessDiagram
@@ -57,7 +57,11 @@ def experiment_section(section: ExperimentSection, out: Path, fmu_dir) -> tuple[
     if section.cross_check:
         lines += cross_check_lines(section, runs, out / f"{stem}-cross-check.png", fmu_dir)
     for name, run in runs.items():
-        lines += [run.section.replace("### ", "### "), "",
+        said = [f"What the FMUs said ([{name}/run.log]({name}/run.log)):", "", *[f"- {line}" for line in run.said],
+                ""] if run.said else []
+        if run.troubles:
+            _say(summary_line(name, run.result, run.troubles))
+        lines += [run.section.replace("### ", "### "), "", *said,
                   *[f"![{p.stem}]({name}/{p.name})" for p in run.figures], ""]
         system = load(name, fmu_dir=fmu_dir)
         if section.seed_table is not None:

@@ -2,7 +2,9 @@
 
 :func:`run_one` never raises for a run that fails: the record says ``status = "failed"`` and
 the message names the block, the variable and the time (the master's
-:class:`~robofmu.system.master.SimulationError`). Runs in one process are serialised by a lock:
+:class:`~robofmu.system.master.SimulationError`). A run that completes says ``status = "ok"``;
+its message is what the FMUs said, grouped (:attr:`~robofmu.system.result.Result.messages`,
+joined by `` | ``), empty when they said nothing. Runs in one process are serialised by a lock:
 all pythonfmu FMUs of a process share its one interpreter, so a worker started with several
 threads still runs one co-simulation at a time (start workers with ``--nthreads 1``).
 """
@@ -44,7 +46,8 @@ def simulate(system, values: dict, stop_time: float | None, step: float | None, 
 
 def run_one(system, values: dict, stop_time: float | None, step: float | None,
             keep: str | None = None) -> dict:
-    """The record of one run: ``values``, the metrics, ``wall_time`` (s), ``status``, ``message``.
+    """The record of one run: ``values``, the metrics, ``wall_time`` (s), ``status``, ``message``
+    (a failure, or what the FMUs of a completed run said).
 
     Parameters
     ----------
@@ -69,7 +72,8 @@ def run_one(system, values: dict, stop_time: float | None, step: float | None,
         except Exception as exc:         # a diagram this value breaks, a file gone: the row says which
             record.update(status="failed", message=" ".join(f"{type(exc).__name__}: {exc}".split()))
         else:
-            record.update(metrics_of(tracking, result, roles), status="ok", message="")
+            record.update(metrics_of(tracking, result, roles), status="ok",
+                          message=" | ".join(" ".join(str(group).split()) for group in result.messages))
             if keep:
                 result.to_csv(Path(keep) / "results.csv")
     record["wall_time"] = time.perf_counter() - start

@@ -377,6 +377,11 @@ class WaypointTrajectory(_Profile):
     grip_close_after_move, grip_open_after_move : int
         The gripper closes at the end of this move (1-based) and opens at the end of that one;
         0 means never.
+    start : array_like, shape (m,), optional
+        The first point, before the rows: the path runs from ``start`` through every row of
+        ``waypoints`` (shape (k, m), one row per move). None: the first row is the start.
+    relative : bool
+        With ``start``: the rows are offsets from ``start`` (the points start + row).
 
     Raises
     ------
@@ -385,12 +390,26 @@ class WaypointTrajectory(_Profile):
     """
 
     def __init__(self, waypoints, durations, pause: float = 0.0, cruise_factor: float = 1.5,
-                 grip_close_after_move: int = 0, grip_open_after_move: int = 0):
+                 grip_close_after_move: int = 0, grip_open_after_move: int = 0, start=None,
+                 relative: bool = False):
         w = np.asarray(waypoints, dtype=float)
-        if w.ndim != 2 or w.shape[0] < 2:
-            raise ValueError(f"waypoints: need at least two points of equal dimension, got shape {w.shape}")
+        self.has_start = start is not None
+        least = 1 if self.has_start else 2
+        if w.ndim != 2 or w.shape[0] < least:
+            raise ValueError(f"waypoints: need at least {least} point{'s' * (least > 1)} of equal dimension"
+                             f"{' after the start' if self.has_start else ''}, got shape {w.shape}")
         if not np.all(np.isfinite(w)):
             raise ValueError("waypoints: every coordinate must be finite")
+        if relative and not self.has_start:
+            raise ValueError("relative: offsets need a start point (start)")
+        if self.has_start:
+            first = _finite_vector(start, "start", w.shape[1])
+            with np.errstate(all="ignore"):
+                w = np.vstack([first, first + w if relative else w])
+            if not np.all(np.isfinite(w)):
+                row, axis = (int(v) for v in np.argwhere(~np.isfinite(w))[0])
+                raise ValueError(f"start[{axis + 1}] = {_g(first[axis])} and waypoints row {row}: the point start + "
+                                 f"offset is {_g(w[row, axis])} in coordinate {axis + 1} (beyond the largest float)")
         k = w.shape[0] - 1
         timeline, t = schedule(durations, pause, k)
         if not (1.0 < cruise_factor <= 2.0):
@@ -437,11 +456,14 @@ class WaypointTrajectory(_Profile):
     def _overflow_message(self, s: Segment, piece: _LSPBPiece, what: str, axis: int, value: float) -> str:
         """Why move ``s`` overflows, naming the parameters (waypoints rows, durations)."""
         i = s.move
+        row = i - 1 if self.has_start else i          # the row the move starts from (0: the start)
+        pair, span = ((f"rows {row} and {row + 1}", f"waypoints rows {row} to {row + 1}") if row else
+                      ("the start and row 1", "the start to waypoints row 1"))
         if what == "distance":
-            return (f"waypoints: rows {i} and {i + 1} are too far apart: coordinate {axis + 1} goes from "
+            return (f"waypoints: {pair} are too far apart: coordinate {axis + 1} goes from "
                     f"{_g(s.x0[axis])} to {_g(s.x1[axis])}, a change of {_g(value)} (beyond the largest float); "
                     "bring the waypoints closer")
-        return (f"durations: move {i} takes {_g(s.end - s.start)} s, too short for waypoints rows {i} to {i + 1} "
+        return (f"durations: move {i} takes {_g(s.end - s.start)} s, too short for {span} "
                 f"(coordinate {axis + 1} changes by {_g(piece.dx[axis])}): its {what} would be {_g(value)} "
                 f"(not finite); give move {i} more time (durations) or bring the waypoints closer")
 
@@ -493,6 +515,22 @@ class StraightLine(_Profile):
     v_max, a_max : float
         Speed (m/s) and acceleration (m/s^2) limits along the path, > 0.
     """
+
+    @classmethod
+    def by_displacement(cls, start, displacement, v_max: float, a_max: float) -> "StraightLine":
+        """The line from ``start`` by ``displacement`` (shape (m,), the start's unit): direction
+        displacement / |displacement|, length |displacement|; ValueError naming ``displacement``
+        if it is zero, not finite or longer than the largest float."""
+        start = _finite_vector(start, "start")
+        d = _finite_vector(displacement, "displacement", len(start))
+        if not d.any():
+            raise ValueError("displacement: must not be the zero vector")
+        biggest = float(np.max(np.abs(d)))
+        with np.errstate(all="ignore"):
+            length = biggest * float(np.linalg.norm(d / biggest))     # no overflow of the squares
+        if not math.isfinite(length):
+            raise ValueError(f"displacement: its length is beyond the largest float ({d.tolist()})")
+        return cls(start, d, length, v_max, a_max)
 
     def __init__(self, start, direction, length: float, v_max: float, a_max: float):
         self.start = _finite_vector(start, "start")

@@ -1,8 +1,13 @@
 """Trajectory blocks: the reference a robot follows, from its description's ``[trajectory]``.
 
 ``waypoints``: task space, LSPB moves through waypoints with pauses (and gripper events); the
-waypoints a list of rows, or a CSV table beside the robot's TOML (``waypoints = "path.csv"``);
-``line``: task space, a straight line at minimum time with a trapezoidal speed;
+waypoints a list of rows, or a CSV table beside the robot's TOML (``waypoints = "path.csv"``),
+the first row the start, or, given ``start`` or ``start_configuration`` (the task point at that
+configuration, default ``"home"``), the points after it, or with ``relative = true`` the offsets
+from it;
+``line``: task space, a straight line at minimum time with a trapezoidal speed, from ``start``
+(default: the task point at ``start_configuration``, ``"home"``) by ``displacement``, or along
+``direction`` for ``length``;
 ``joint_bangbang``: joint space, the synchronized minimum-time bang-bang;
 ``circle``: task space, once round a circle in the first two task coordinates with an LSPB
 phase (further task coordinates offset + amplitude sin phi);
@@ -44,10 +49,10 @@ class _Reference(Block):
             out.append(self.reals(base, n, "output", unit, lambda i, w=what: describe(i, w), depends=[]))
         self.outputs = out
 
-    def given(self, vectors: dict[str, int]) -> tuple[dict, dict]:
-        """The description's ``[trajectory]`` values: the vectors (checked for their lengths) and
-        the rest."""
-        given = dict(self.description.trajectory.parameters)
+    def given(self, vectors: dict[str, int], parameters: dict | None = None) -> tuple[dict, dict]:
+        """The description's ``[trajectory]`` values (or ``parameters``, some of them): the vectors
+        (checked for their lengths) and the rest."""
+        given = dict(self.description.trajectory.parameters if parameters is None else parameters)
         for key, length in vectors.items():
             value = given.get(key)
             if value is None:
@@ -87,6 +92,21 @@ class _Reference(Block):
                 self.table_error("trajectory", "waypoints", str(exc))
             self.description = replace(self.description, trajectory=replace(
                 self.description.trajectory, parameters={**self.description.trajectory.parameters, "waypoints": rows}))
+
+    def start_point(self, given: dict, length: int, fk) -> tuple[str, list]:
+        """Pops ``start_configuration`` (default ``"home"``) and ``start`` of ``given``: the
+        configuration's name and the start, ``start`` if given (``length`` values), else
+        ``fk(q)`` of the configuration's joints q (a list). Table errors naming the key."""
+        named = given.pop("start_configuration", "home")
+        if not isinstance(named, str) or named not in self.description.configurations:
+            self.table_error("trajectory", "start_configuration", f"no configuration {named!r} (described: "
+                             f"{', '.join(self.description.configurations)})")
+        start = given.pop("start", None)
+        if start is None:
+            return named, np.asarray(fk(self.robot.configuration(named)), dtype=float).tolist()
+        if not isinstance(start, list) or len(start) != length:
+            self.table_error("trajectory", "start", f"needs {length} values, got {start!r}")
+        return named, start
 
     def string_parameter(self, name, description, start):
         self.setting(Parameter(name, "String", "", description, start), start)
@@ -134,11 +154,22 @@ class WaypointsBlock(_Reference):
 
     def declare(self):
         self.read_waypoints(self.description.task.coordinates)
-        vectors, rest = self.given({"waypoints": 0, "durations": 0})
+        coords, units = _task(self)
+        parameters = dict(self.description.trajectory.parameters)
+        self.relative = parameters.pop("relative", False)
+        if not isinstance(self.relative, bool):
+            self.table_error("trajectory", "relative", f"must be true or false, got {self.relative!r}")
+        self.has_start = self.relative or "start" in parameters or "start_configuration" in parameters
+        if self.has_start:
+            named, start = self.start_point(parameters, len(coords), self.robot.fk)
+            self.reals("start", len(coords), "parameter", units[0],
+                       lambda i: f"Start point, coordinate {coords[i - 1]} (default: at configuration {named!r})",
+                       start)
+        vectors, rest = self.given({"waypoints": 0, "durations": 0}, parameters)
         given = {**vectors, **rest}
         values = self.table_values("trajectory", self.settings_declared, rest)
-        coords, units = _task(self)
-        self.string_parameter("waypoints", f"Waypoints ({', '.join(units[0])}), one row per point "
+        row = ("offset from start" if self.relative else "point after start") if self.has_start else "point"
+        self.string_parameter("waypoints", f"Waypoints ({', '.join(units[0])}), one row per {row} "
                               f"('{' '.join(coords)}'), rows separated by ';'", format_matrix(given["waypoints"]))
         self.string_parameter("durations", "Duration of each move (s), space-separated; one per leg",
                               format_vector(given["durations"]))
@@ -160,7 +191,8 @@ class WaypointsBlock(_Reference):
             parse_matrix(str(self.settings["waypoints"]), "parameter waypoints", columns=m),
             parse_vector(str(self.settings["durations"]), "parameter durations"),
             pause=self.parameter("pause"), cruise_factor=self.parameter("cruise_factor"),
-            grip_close_after_move=close, grip_open_after_move=open_)
+            grip_close_after_move=close, grip_open_after_move=open_,
+            start=self.finite_vector("start") if self.has_start else None, relative=self.relative)
         super().configure()
 
     def output(self, t):
@@ -180,8 +212,8 @@ class LineBlock(_Reference):
     variant = "line"
     summary = ("task-space straight line at minimum time with a trapezoidal speed profile (v_max, "
                "a_max), then at rest; outputs at time t belong to t")
-    scalars = (
-        Parameter("length", "Real", "m", "Path length", None, above=0.0),
+    length = Parameter("length", "Real", "m", "Path length", None, above=0.0)
+    limits = (
         Parameter("v_max", "Real", "m/s", "Speed limit along the path", None, above=0.0),
         Parameter("a_max", "Real", "m/s2", "Acceleration limit along the path", None, above=0.0),
     )
@@ -189,24 +221,37 @@ class LineBlock(_Reference):
     def declare(self):
         coords, units = _task(self)
         m = len(coords)
-        given, rest = self.given({"start": m, "direction": m})
+        parameters = dict(self.description.trajectory.parameters)
+        named, start = self.start_point(parameters, m, self.robot.fk)
+        self.by_displacement = "displacement" in parameters
+        if self.by_displacement and {"direction", "length"} & set(parameters):
+            self.table_error("trajectory", "displacement", "give either displacement or direction and length, "
+                             "not both")
+        given, rest = self.given({"displacement": m} if self.by_displacement else {"direction": m}, parameters)
+        self.scalars = self.limits if self.by_displacement else (self.length,) + self.limits
         values = self.table_values("trajectory", self.scalars, rest)
-        self.start = self.reals("start", m, "parameter", units[0],
-                                lambda i: f"Start point, coordinate {coords[i - 1]}", given["start"])
-        self.direction = self.reals("direction", m, "parameter", "1",
-                                    lambda i: f"Direction of travel, component {coords[i - 1]} "
-                                              "(normalized by the block)", given["direction"])
+        self.reals("start", m, "parameter", units[0],
+                   lambda i: f"Start point, coordinate {coords[i - 1]} (default: at configuration {named!r})", start)
+        if self.by_displacement:
+            self.reals("displacement", m, "parameter", units[0],
+                       lambda i: f"Displacement from the start point, coordinate {coords[i - 1]}",
+                       given["displacement"])
+        else:
+            self.reals("direction", m, "parameter", "1", lambda i: f"Direction of travel, component "
+                       f"{coords[i - 1]} (normalized by the block)", given["direction"])
         for p in self.scalars:
             self.declare_parameter(p, values[p.name])
         self.declare_outputs(("x_ref", "xd_ref", "xdd_ref"), units,
                              lambda i, w: f"Reference task {w} along {coords[i - 1]}")
 
     def configure(self):
-        direction = self.finite_vector("direction")
-        if not direction.any():
-            raise ValueError("parameter direction = (0, ..., 0) is invalid: must not be the zero vector")
-        self.profile = StraightLine(self.finite_vector("start"), direction, self.parameter("length"),
-                                    self.parameter("v_max"), self.parameter("a_max"))
+        way = "displacement" if self.by_displacement else "direction"
+        vector = self.finite_vector(way)
+        if not vector.any():
+            raise ValueError(f"parameter {way} = (0, ..., 0) is invalid: must not be the zero vector")
+        start, v_max, a_max = self.finite_vector("start"), self.parameter("v_max"), self.parameter("a_max")
+        self.profile = (StraightLine.by_displacement(start, vector, v_max, a_max) if self.by_displacement else
+                        StraightLine(start, vector, self.parameter("length"), v_max, a_max))
         super().configure()
 
 
@@ -339,12 +384,8 @@ class PoseLineBlock(_PoseReference):
         robot = self.robot
         frame = self.require_pose_task()
         given = dict(self.description.trajectory.parameters)
-        named = given.pop("start_configuration", "home")
-        if named not in self.description.configurations:
-            self.table_error("trajectory", "start_configuration", f"no configuration {named!r} (described: "
-                             f"{', '.join(self.description.configurations)})")
-        q = robot.configuration(named)
-        defaults = {"start": robot.fk(q).tolist(), "start_quaternion": quaternion_of(robot.rotation(q))}
+        named, given["start"] = self.start_point(given, 3, robot.fk)
+        defaults = {"start_quaternion": quaternion_of(robot.rotation(robot.configuration(named)))}
         for key, length in (("start", 3), ("start_quaternion", 4), ("displacement", 3), ("rotation", 3)):
             value = given.pop(key, defaults.get(key))
             if value is None:

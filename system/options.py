@@ -4,6 +4,14 @@ The spellings are those of FMI tools (``fmpy simulate``): ``--stop-time``, ``--s
 ``--algorithm gauss-seidel|jacobi``, ``--fmus``, ``--out``. An older spelling still works for
 now and prints a one-line deprecation warning (:func:`deprecated_alias`). A test walks every
 subcommand's parser and fails when two commands name one concept differently.
+
+Option values are checked by the validators here, called by each command before it runs:
+:func:`finite` (no NaN or infinity), :func:`whole` (an integer with a least value: a count >= 1,
+a seed >= 0); each refusal is a :class:`~robofmu.system.usage.UsageError` naming the option and
+its value, so the command answers in one line with exit status 2. :func:`one_line_errors`
+makes a command's parser answer argparse's own mistakes in one line too. The times
+(``--step-size``, ``--stop-time``) are checked where the experiment's defaults are known
+(:func:`robofmu.system.usage.timing`).
 """
 from __future__ import annotations
 
@@ -15,7 +23,7 @@ from robofmu.system import defaults
 from robofmu.system.diagram import parameter_address
 
 __all__ = ["PARAMETER_SETTING", "add_algorithm", "add_fmus", "add_out", "add_step_size", "add_stop_time",
-           "deprecated_alias", "number", "parse_setting"]
+           "deprecated_alias", "finite", "number", "one_line_errors", "parse_setting", "whole"]
 
 #: What ``--set`` and a sweep's ``--vary`` take before ``=``.
 PARAMETER_SETTING = "BLOCK.PARAM=VALUE"
@@ -105,3 +113,40 @@ def number(text: str, where: str) -> float | bool:
     if not math.isfinite(value):
         raise ValueError(f"{where}: {text.strip()!r} is not a finite number")
     return value
+
+
+def finite(option: str, value: float | None) -> float | None:
+    """``value`` of ``option`` if it is a finite number (None: not given); UsageError naming the
+    option otherwise (NaN, infinity)."""
+    from robofmu.system.usage import UsageError
+
+    if value is not None and not math.isfinite(value):
+        raise UsageError(f"{option} {value:g}: must be a finite number")
+    return value
+
+
+def whole(option: str, value: int | None, least: int) -> int | None:
+    """``value`` of ``option`` if it is a whole number >= ``least`` (None: not given); UsageError
+    naming the option otherwise (a count below 1, a negative seed)."""
+    from robofmu.system.usage import UsageError
+
+    if value is not None and not value >= least:
+        raise UsageError(f"{option} {value}: must be a whole number >= {least}")
+    return value
+
+def one_line_errors(parser: argparse.ArgumentParser) -> None:
+    """Make ``parser`` (a command's) report argparse's own mistakes (a bad value, an unknown
+    option) in one line ``robofmu <command>: argument --option: ...``, exit status 2."""
+    def error(message: str):
+        parser.exit(2, f"{parser.prog}: {message}\n")
+
+    parse_known_args = parser.parse_known_args
+
+    def parse_known_args_strictly(args=None, namespace=None):
+        namespace, extras = parse_known_args(args, namespace)
+        if extras:
+            error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
+
+    parser.error = error
+    parser.parse_known_args = parse_known_args_strictly

@@ -71,7 +71,7 @@ class Outputs:
 OUTPUTS = {
     "run": Outputs(("results.csv", "results.parquet", "report.md", "run.log", "*.png")),
     "sweep": Outputs(("sweep.json", "sweep.csv", "sweep.csv.tmp", "sweep.parquet", "sweep.parquet.tmp",
-                      "report.md", "*.png"), folders=("runs",)),
+                      "report.md", "*.png", f".*{PARTIAL}"), folders=("runs",)),
     "workspace": Outputs(("*.md", "*.png")),
     "convergence": Outputs(("convergence.md", "convergence.png", "convergence.json")),
     "demo": Outputs(("*.md", "*.png", "*.csv"), folders=("*",)),

@@ -31,8 +31,9 @@ def add_parser(subparsers):
 
 
 def main(args) -> int:
-    from robofmu.system.interop.container import export_container
+    from robofmu.system.interop.container import export_container, is_robofmu_container
 
     return export_experiment("container", args.experiment, args.out, args.fmus, ".fmu",
                              lambda system, out: export_container(system, out, algorithm=args.algorithm,
-                                                                  expose_signals=args.expose_signals))
+                                                                  expose_signals=args.expose_signals),
+                             owned=is_robofmu_container, what="a FMU container robofmu wrote")

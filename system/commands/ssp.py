@@ -23,7 +23,8 @@ def add_parser(subparsers):
 
 
 def main(args) -> int:
-    from robofmu.system.interop.ssp import export_ssp
+    from robofmu.system.interop.ssp import export_ssp, is_robofmu_ssp
 
     return export_experiment("ssp", args.experiment, args.out, args.fmus, ".ssp",
-                             lambda system, out: export_ssp(system, out, inline=args.inline))
+                             lambda system, out: export_ssp(system, out, inline=args.inline),
+                             owned=is_robofmu_ssp, what="an SSP package robofmu wrote")

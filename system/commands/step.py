@@ -9,6 +9,12 @@ amplitude (``--amplitude``). Older spellings still work and warn in one line: ``
 (``--stop-time``), ``--driver master|jacobi`` (``--algorithm gauss-seidel|jacobi``),
 ``--step-height`` / ``--height`` (``--amplitude``).
 
+The amplitude must be finite and not 0, and the held reference ``q0 + amplitude`` of each
+stepped joint within its position limits (a joint without limits: a step of at most one turn,
+2 pi rad, or 1 m): the predictions are of a step the loop can follow. ``--step-size`` must not
+exceed ``--stop-time`` (a given stop time is a whole number of steps), and the recording must fit
+in memory (:func:`~robofmu.system.usage.check_memory`).
+
 ``--robot`` is a robot of the package by name or the path of a robot TOML anywhere (as for
 ``robofmu build``); either way its FMUs are ``<--fmus>/<its name>/{controller,plant}.fmu``.
 """
@@ -19,7 +25,8 @@ import math
 from pathlib import Path
 
 from robofmu.system import defaults, options
-from robofmu.system.usage import UsageError, check_fmu_folder, check_times, check_writable, one_line, say, stopped
+from robofmu.system.usage import UsageError, atomic_file, check_fmu_folder, check_times, check_writable, one_line, say, \
+    stopped
 
 HELP = "co-simulate a joint reference step and compare it with linear predictions"
 
@@ -32,24 +39,6 @@ class _Driver(options.deprecated_alias("--algorithm")):
 
     def __call__(self, parser, namespace, values, option_string=None):
         super().__call__(parser, namespace, _DRIVER_ALGORITHMS[values], option_string)
-
-
-def _answer_in_one_line(parser: argparse.ArgumentParser) -> None:
-    """Make ``parser`` report argparse's own mistakes (bad values, unknown options) in one line,
-    exit status 2."""
-    def error(message: str):
-        parser.exit(2, f"{parser.prog}: {message}\n")
-
-    parse_known_args = parser.parse_known_args
-
-    def parse_known_args_strictly(args=None, namespace=None):
-        namespace, extras = parse_known_args(args, namespace)
-        if extras:
-            error(f"unrecognized arguments: {' '.join(extras)}")
-        return namespace, extras
-
-    parser.error = error
-    parser.parse_known_args = parse_known_args_strictly
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -81,8 +70,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     options.add_step_size(p, default=defaults.STEP_SIZE)
     p.add_argument("--amplitude", type=float, nargs="+", metavar="A",
                    help="size of the reference step in joint units (rad or m): one for every stepped joint, "
-                        "one per joint, or one per stepped joint (default: the step experiment's "
-                        "DEFAULT_AMPLITUDE per joint unit, downward where it would pass the joint's upper limit)")
+                        "one per joint, or one per stepped joint; finite, not 0, the reference within the joint's "
+                        "position limits (without limits: at most one turn, 2 pi rad, or 1 m) (default: the step "
+                        "experiment's DEFAULT_AMPLITUDE per joint unit, downward where it would pass the joint's "
+                        "upper limit)")
     for old in ("--step-height", "--height"):
         p.add_argument(old, dest="amplitude", type=float, nargs="+", metavar="A",
                        action=options.deprecated_alias("--amplitude"), help=argparse.SUPPRESS)
@@ -97,7 +88,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     options.add_fmus(p)
     options.add_out(p, "write the CSVs and the figure into this folder (created; other files in it stay)")
     p.set_defaults(func=main)
-    _answer_in_one_line(p)
+    options.one_line_errors(p)
     return p
 
 
@@ -182,6 +173,73 @@ def _robot(args):
     return description
 
 
+#: Largest reference step on a joint without position limits, by joint unit: one turn, 1 m.
+UNBOUNDED_AMPLITUDE = {"rad": 2.0 * math.pi, "m": 1.0}
+
+#: Bytes of memory per communication step and joint: the recording (q and tau, 8 bytes each),
+#: the three linear predictions and the comparison's copies, about four times over.
+BYTES_PER_STEP_AND_JOINT = 4 * 8 * 5
+
+
+def _stem(args) -> str:
+    """The file names' stem: ``step_h1ms``."""
+    return f"step_h{args.step_size * 1e3:g}ms"
+
+
+def _check_reference(args, robot, setup) -> None:
+    """Refuse (UsageError naming ``--amplitude`` or ``--q0``) a step whose start or held reference
+    ``q0 + amplitude`` leaves a stepped joint's position limits, or a step larger than
+    :data:`UNBOUNDED_AMPLITUDE` on a joint without limits: the linear predictions are of a step
+    the loop can follow."""
+    from robofmu.components.robots import load_model
+
+    lower, upper = load_model(robot).position_limits()
+    for j in setup.joints:
+        k, unit = j - 1, setup.joint_units[j - 1]
+        if args.q0 is not None and not lower[k] <= setup.q0[k] <= upper[k]:
+            raise UsageError(f"--q0: joint {j} at {setup.q0[k]:g} {unit} is outside its limits "
+                             f"[{lower[k]:g}, {upper[k]:g}] {unit}")
+        amplitude, target = setup.amplitudes[k], setup.q_ref[k]
+        if math.isfinite(lower[k]) or math.isfinite(upper[k]):
+            if not lower[k] <= target <= upper[k]:
+                bound = upper[k] if target > upper[k] else lower[k]
+                raise UsageError(f"--amplitude: joint {j}: {amplitude:g} {unit} from {setup.q0[k]:g} {unit} passes "
+                                 f"its {'upper' if bound == upper[k] else 'lower'} limit {bound:g} {unit}; give an "
+                                 f"amplitude from {lower[k] - setup.q0[k]:g} to {upper[k] - setup.q0[k]:g} {unit}")
+        elif abs(amplitude) > UNBOUNDED_AMPLITUDE.get(unit, 1.0):
+            raise UsageError(f"--amplitude: joint {j}: {amplitude:g} {unit} is more than "
+                             f"{UNBOUNDED_AMPLITUDE.get(unit, 1.0):g} {unit}, the largest step on a joint without "
+                             "position limits")
+
+
+def _stop_time(args, design, joints: int) -> float:
+    """The stop time (s): ``--stop-time`` or the default (3 x the designed settling time), a whole
+    number of steps; UsageError naming ``--step-size`` and ``--stop-time`` for a step longer than
+    the run, and for a run whose recording would not fit in memory."""
+    from robofmu.system.check import step_count
+    from robofmu.system.usage import check_memory
+
+    stop_time = args.stop_time
+    if stop_time is None:
+        stop_time = max(defaults.STOP_TIME, 3.0 * args.settling_time) if design else defaults.STOP_TIME
+    given = f"--step-size {args.step_size:g} s, --stop-time {stop_time:g} s" + \
+        ("" if args.stop_time is not None else " (the default)")
+    if args.step_size > stop_time:
+        raise UsageError(f"{given}: the step is longer than the run; give a --step-size at most the --stop-time")
+    ratio = stop_time / args.step_size
+    if not ratio <= 1e15:
+        raise UsageError(f"{given}: {ratio:.3g} steps, far more than memory can record")
+    steps = round(ratio)
+    if args.stop_time is not None:
+        try:
+            step_count(0.0, stop_time, args.step_size)
+        except ValueError:
+            raise UsageError(f"{given}: the stop time is not a whole number of steps") from None
+    check_memory((steps + 1) * joints * BYTES_PER_STEP_AND_JOINT, f"{given}: {steps} steps",
+                 "give a larger --step-size or a shorter --stop-time")
+    return steps * args.step_size
+
+
 def main(args) -> int:
     from robofmu.system.master import SimulationError
     from robofmu.system.stepresponse import compare, cosimulate_step, plot_comparison, step_setup, step_system, \
@@ -197,16 +255,15 @@ def main(args) -> int:
             option = {"amplitude": "--amplitude", "joint": "--joint", "q0": "--q0",
                       "robot": "--robot"}.get(argument)
             raise UsageError(f"{option}: {message}" if option else f"--robot: {exc}") from None
+        _check_reference(args, robot, setup)
         design = _design(args)
         kp, kd, ki = _gains(args, robot, design)
-        stop_time = args.stop_time
-        if stop_time is None:
-            stop_time = max(defaults.STOP_TIME, 3.0 * args.settling_time) if design else defaults.STOP_TIME
-        stop_time = max(1, round(stop_time / args.step_size)) * args.step_size
+        stop_time = _stop_time(args, design, len(setup.q0))
         check_fmu_folder(step_system(args.fmus, kp, kd, ki, robot=robot, amplitude=setup.amplitudes,
                                      h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0))
         if args.out is not None:
             check_writable(args.out, "--out")
+            check_writable(Path(args.out) / f"{_stem(args)}_cosim.csv", "--out", file=True)
         result = cosimulate_step(Path(args.fmus), kp, kd, ki, robot=robot, amplitude=setup.amplitudes,
                                  h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0,
                                  algorithm=args.algorithm)
@@ -231,13 +288,15 @@ def main(args) -> int:
                   f"{m.overshoot:.3f} % ({overshoot_error})")
     if args.out:
         out = Path(args.out)
-        stem = f"step_h{args.step_size * 1e3:g}ms"
+        stem = _stem(args)
         try:
-            result.to_csv(out / f"{stem}_cosim.csv")
-            write_csv(comparison, out / f"{stem}_compare.csv")
+            with atomic_file(out / f"{stem}_cosim.csv") as partial:
+                result.to_csv(partial)
+            with atomic_file(out / f"{stem}_compare.csv") as partial:
+                write_csv(comparison, partial)
             figure = plot_comparison(comparison, out, stem)
-        except OSError as exc:
-            say("step", f"cannot write {out}: {exc.strerror or exc}")
-            return 1
+        except OSError as exc:           # checked before the run: the folder changed since
+            say("step", f"--out {out}: cannot write it: {exc.strerror or exc}")
+            return 2
         print(f"wrote {out / (stem + '_cosim.csv')}, {out / (stem + '_compare.csv')}, {figure}")
     return 0

@@ -33,7 +33,8 @@ def add_parser(subparsers):
     options.add_stop_time(p)
     options.add_fmus(p)
     p.add_argument("--keep-results", action="store_true", help="keep each run's results.csv under DIR/runs/")
-    p.add_argument("--retry-failed", action="store_true", help="run the failed rows of an earlier sweep again")
+    p.add_argument("--retry-failed", action="store_true", help="run the failed rows of an earlier sweep again "
+                                                               "(refused where DIR holds no earlier run of it)")
     p.add_argument("--metric", metavar="NAME", help="the metric the figures map (default: max_tcp_error where "
                                                    "there is one, else max_joint_error)")
     p.add_argument("--threshold", type=float, metavar="VALUE", help="the metric's level drawn as a contour "

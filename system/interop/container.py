@@ -80,8 +80,9 @@ from robofmu.system.master import SimulationError
 from robofmu.system.result import Result
 from robofmu.system.interop.ssp import parameter_values
 from robofmu.system.packaging.validate import toolbox_errors_only
+from robofmu.system.usage import atomic_file
 
-__all__ = ["container_order", "export_container", "model_identifier", "run_container"]
+__all__ = ["container_order", "export_container", "is_robofmu_container", "model_identifier", "run_container"]
 
 
 def container_order(planned: Plan) -> list[str]:
@@ -185,8 +186,22 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
         if expose_signals:
             _locals_as_outputs(Path(folder) / path.name, [f"{block}.{output}" for block, output in sorted(sources)])
         fmi_export.install_front(Path(folder) / path.name)
-        shutil.move(Path(folder) / path.name, path)
+        with atomic_file(path) as partial:          # the earlier container stays until it is whole
+            shutil.move(Path(folder) / path.name, partial)
     return path
+
+
+def is_robofmu_container(path: str | Path) -> bool:
+    """Whether ``path`` is a FMU container :func:`export_container` wrote (robofmu's front in
+    front of the container runtime, :data:`~robofmu.components.fmi.contract.FRONT_BEHIND`): the
+    only kind of file ``robofmu container --out`` replaces."""
+    from robofmu.components.fmi.contract import FRONT_BEHIND, PLATFORM
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return f"binaries/{PLATFORM}/{FRONT_BEHIND}" in zf.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
 
 
 def _locals_as_outputs(fmu: Path, names: list[str]) -> None:

@@ -106,6 +106,7 @@ import numpy as np
 from robofmu.system.check import plan, step_count, variable_unit
 from robofmu.system.diagram import System, coerce, expand, select, spread
 from robofmu.system.result import Result
+from robofmu.system.usage import atomic_file
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -115,6 +116,8 @@ NS = {
 }
 OSP_ANNOTATION = "com.opensimulationplatform"
 SSD_NAME = "SystemStructure.ssd"
+#: The SSD's ``generationTool``: what :func:`is_robofmu_ssp` recognizes.
+GENERATION_TOOL = "robofmu"
 _TYPES = {"Real": "Real", "Integer": "Integer", "Boolean": "Boolean", "String": "String"}
 
 for _prefix, _uri in NS.items():
@@ -240,7 +243,7 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     system_name = ssp_identifier(system.name)
     element = element_names([spec.name for spec in system.blocks])
     root = ET.Element(_q("ssd:SystemStructureDescription"),
-                      {"version": "1.0", "name": system_name, "description": system.name, "generationTool": "robofmu"})
+                      {"version": "1.0", "name": system_name, "description": system.name, "generationTool": GENERATION_TOOL})
     sys_attrs = {"name": system_name}
     if system.description:
         sys_attrs["description"] = system.description
@@ -315,16 +318,23 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     ET.SubElement(ET.SubElement(ann, _q("osp:Algorithm")), _q("osp:FixedStepAlgorithm"),
                   {"baseStepSize": _fmt_real(system.step)})
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+    with atomic_file(path) as partial, zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         zf.writestr(SSD_NAME, _xml_bytes(root))
         for fmu, name in sources.items():
             zf.write(fmu, f"resources/{name}")
         for name, data in ssv_files.items():
             zf.writestr(name, data)
-    tmp.replace(path)
     return path
+
+
+def is_robofmu_ssp(path: str | Path) -> bool:
+    """Whether ``path`` is an SSP package :func:`export_ssp` wrote (its SSD's generationTool is
+    :data:`GENERATION_TOOL`): the only kind of file ``robofmu ssp --out`` replaces."""
+    try:
+        root = ET.fromstring(ssd_text(path))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError):
+        return False
+    return root.get("generationTool") == GENERATION_TOOL
 
 
 # -- running ------------------------------------------------------------------------------------

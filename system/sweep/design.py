@@ -22,14 +22,15 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from robofmu.system.diagram import parameter_address
-from robofmu.system.options import number
-from robofmu.system.usage import say
+from robofmu.system.options import number, whole
+from robofmu.system.usage import check_memory, say
 
 __all__ = ["RENAMED_AXES", "STEP_SIZE_AXIS", "Axis", "Design", "DesignError", "parse_axis"]
 
@@ -43,6 +44,16 @@ RENAMED_AXES = {"step": STEP_SIZE_AXIS}
 _NUMBER = r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
 _DISTRIBUTION = re.compile(rf"^\s*(uniform|normal)\s*\({_NUMBER},{_NUMBER}\)\s*$")
 DISTRIBUTIONS = {"uniform": "uniform(LOW,HIGH): LOW < HIGH", "normal": "normal(MEAN,STD): STD > 0"}
+#: Memory a sweep holds per run, in bytes (bounded above): its values, their typed copy, key and
+#: journal row, and its Dask task (about 0.7 kB before the rows and tasks, measured).
+BYTES_PER_RUN = 4096
+
+
+def check_runs(count: int, where: str) -> None:
+    """Refuse (UsageError naming ``where``) a sweep of ``count`` runs whose bookkeeping alone would
+    not fit in memory (:func:`~robofmu.system.usage.check_memory`), before anything is allocated."""
+    check_memory(count * BYTES_PER_RUN, f"{where}: {count} runs", "give fewer runs (a smaller --samples, "
+                 "fewer grid values), or split the sweep")
 
 
 class DesignError(ValueError):
@@ -138,6 +149,7 @@ def _axis(text: str, option: str) -> Axis:
             count = 0
         if count < 2 or isinstance(start, bool) or isinstance(stop, bool):
             raise DesignError(f"{option}: a range is START:STOP:COUNT with numbers and a whole COUNT >= 2")
+        check_runs(count, option)               # each value is a run at least: before linspace allocates
         grid = tuple(float(v) for v in np.linspace(start, stop, count))
         return Axis(name, grid)
     grid = tuple(number(v, option) for v in values.split(","))
@@ -189,6 +201,11 @@ class Design:
                                   "(uniform(LOW,HIGH) or normal(MEAN,STD))")
             if self.samples < 1:
                 raise DesignError(f"--samples {self.samples}: must be at least 1")
+        whole("--seed", self.seed, 0)
+        grid = [a for a in self.axes if not a.random]
+        count = math.prod(len(a.values) for a in grid) * (self.samples or 1)
+        check_runs(count, " x ".join([f"--vary {a.name} ({len(a.values)} values)" for a in grid]
+                                     + ([f"--samples {self.samples}"] if self.samples else [])))
         if self.step is not None and STEP_SIZE_AXIS in names:
             raise DesignError(f"--step-size: the step is varied (--vary {STEP_SIZE_AXIS}=...); "
                               "give one or the other")

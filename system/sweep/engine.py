@@ -22,7 +22,7 @@ from typing import Callable
 
 from robofmu.system.interrupt import sigint_flag
 
-__all__ = ["PRELOAD", "SweepProgress", "cluster_client", "default_workers", "execute"]
+__all__ = ["PRELOAD", "SweepProgress", "cluster_client", "default_workers", "execute", "probe_scheduler"]
 
 #: The module a worker preloads (it ignores SIGINT: Ctrl-C is the client's to handle).
 PRELOAD = "robofmu.system.sweep.worker"
@@ -34,6 +34,37 @@ def default_workers() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:
         return os.cpu_count() or 1
+
+
+def probe_scheduler(scheduler: str, timeout: float = 1.0) -> None:
+    """Refuse at once a scheduler address nothing listens at: a TCP connection to it that is
+    refused (as at a closed local port) fails in microseconds, whereas Dask waits for its whole
+    connect timeout. A host that does not answer within ``timeout`` s is left to Dask's timeout.
+
+    Raises
+    ------
+    ConnectionError
+        The connection is refused, or the host cannot be resolved (the message names the
+        address); ValueError (naming ``--scheduler``): an address with no port.
+    """
+    import socket
+
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    protocol, location = parse_address(scheduler)
+    if protocol not in ("tcp", "tls"):
+        return
+    try:
+        host, port = parse_host_port(location)
+    except ValueError as exc:
+        raise ValueError(f"--scheduler {scheduler}: {exc}; e.g. tcp://host:8786") from None
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except (ConnectionRefusedError, socket.gaierror) as exc:
+        raise ConnectionError(f"--scheduler {scheduler}: cannot connect: {exc.strerror or exc}; is a Dask "
+                              "scheduler running there?") from None
+    except OSError:                    # silent (a timeout) or unreachable: Dask's timeout decides
+        return
 
 
 @contextmanager

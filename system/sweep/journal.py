@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from robofmu.system.sweep.design import RENAMED_AXES
+from robofmu.system.usage import atomic_file
 
 __all__ = ["Journal", "cell", "key_of"]
 
@@ -78,12 +79,10 @@ class Journal:
         self._rewrite(list(self.rows.values()))          # drop a line cut short
 
     def _rewrite(self, rows: list[dict[str, str]]) -> None:
-        temporary = self.path.with_suffix(".csv.tmp")
-        with temporary.open("w", newline="") as f:
+        with atomic_file(self.path) as temporary, temporary.open("w", newline="") as f:
             writer = csv.writer(f)
             writer.writerow(self.columns)
             writer.writerows([row[c] for c in self.columns] for row in rows)
-        os.replace(temporary, self.path)
 
     def forget_failed(self) -> int:
         """Drop the failed rows (to run them again); returns how many."""
@@ -144,8 +143,7 @@ class Journal:
             else:
                 table[c] = pa.array([float(t) if t else float("nan") for t in texts], pa.float64())
         path = self.path.with_suffix(".parquet")
-        temporary = path.with_suffix(".parquet.tmp")
-        pq.write_table(pa.table(table), temporary)
-        os.replace(temporary, path)
+        with atomic_file(path) as temporary:
+            pq.write_table(pa.table(table), temporary)
         self._parquet_at = time.monotonic()
         return path

@@ -17,6 +17,7 @@ from robofmu.system.units import printed
 from robofmu.system.sweep.design import STEP_SIZE_AXIS
 from robofmu.system.sweep.figures import HEADLINE, column, shown, sweep_figures, threshold_text
 from robofmu.system.sweep.journal import cell, key_of
+from robofmu.system.usage import atomic_file
 from robofmu.system.sweep.result import SweepRun
 
 __all__ = ["default_metric", "default_threshold", "reproduce_command", "write_report"]
@@ -266,6 +267,6 @@ def write_report(run: SweepRun, figures: bool = True, metric: str | None = None,
         text += ["", "## Figures", ""]
         text += [f"![{p.stem}]({p.name})" for p in run.figures]
     path = Path(run.folder) / "report.md"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(text) + "\n")
+    with atomic_file(path) as partial:
+        partial.write_text("\n".join(text) + "\n")
     return path

@@ -28,7 +28,8 @@ from robofmu.system.diagram import coerce, expand
 from robofmu.system.master import DiagramError, Master
 from robofmu.system.roles import check_roles
 from robofmu.system.sweep.design import STEP_SIZE_AXIS, Design
-from robofmu.system.sweep.engine import SweepProgress, cluster_client, default_workers, execute
+from robofmu.system.options import finite
+from robofmu.system.sweep.engine import SweepProgress, cluster_client, default_workers, execute, probe_scheduler
 from robofmu.system.sweep.journal import Journal, key_of
 from robofmu.system.sweep.metrics import METRIC_UNITS, metric_names
 from robofmu.system.sweep.report import write_report
@@ -134,7 +135,8 @@ def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = defaults.FM
     keep_results : bool
         Keep each run's ``results.csv`` under ``out/runs/run-NNNNN/``.
     retry_failed : bool
-        Run the failed rows of an earlier invocation again.
+        Run the failed rows of an earlier invocation again (refused where ``out`` holds no earlier
+        run of this design: there is nothing to retry).
     progress : bool
         Print a progress line to stderr.
     figures : bool
@@ -150,17 +152,24 @@ def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = defaults.FM
     ValueError
         A mistake, before anything runs (UsageError, DesignError, ExperimentError, DiagramError).
     ConnectionError
-        ``scheduler`` cannot be reached.
+        ``scheduler`` cannot be reached: at once where the connection is refused
+        (:func:`~robofmu.system.sweep.engine.probe_scheduler`), else after Dask's timeout.
     SweepInterrupted
         Ctrl-C: the finished rows are kept (sweep.csv, sweep.parquet, report.md).
     """
     if workers is not None and workers < 1:
         raise UsageError(f"--workers {workers}: must be at least 1")
+    finite("--threshold", threshold)
+    if scheduler:
+        probe_scheduler(scheduler)           # a refused connection at once, not after Dask's timeout
     out = Path(out)
+    continuing = _folder(out, design)
+    if retry_failed and not continuing:
+        raise UsageError(f"--retry-failed: --out {out} holds no earlier run of this sweep, so nothing failed to "
+                         "retry; run it without --retry-failed")
     system, roles, metrics, units, runs = check(design, fmu_dir)
     if metric is not None and metric not in metrics:
         raise UsageError(f"--metric {metric}: not a metric of this sweep (metrics: {', '.join(metrics[:4])}, ...)")
-    continuing = _folder(out, design)
     with ExitStack() as stack:
         client = stack.enter_context(cluster_client(None, scheduler)) if scheduler else None
         out.mkdir(parents=True, exist_ok=True)

@@ -243,6 +243,15 @@ def _acceptable(found: Posture, length: float, sigma_floor: float) -> bool:
     return found.margin >= MARGIN - 1e-9 and found.height >= HEIGHT * length and found.sigma_min >= sigma_floor
 
 
+def _failed(found: Posture, length: float, sigma_floor: float) -> str:
+    """What keeps ``found`` from the posture rule, in words."""
+    return ", ".join(problem for problem, bad in (
+        (f"a joint {found.margin * 100:.0f} % of its range from a limit (< {MARGIN * 100:g} %)",
+         found.margin < MARGIN - 1e-9),
+        (f"the tool {found.height:.3g} m above the first joint (< {HEIGHT * length:.3g} m)", found.height < HEIGHT * length),
+        (f"smallest singular value {found.sigma_min:.3g} (< {sigma_floor:g})", found.sigma_min < sigma_floor)) if bad)
+
+
 def rule_home(robot, length: float, samples: int = SAMPLES, seed: int = SEED) -> Posture | None:
     """The rule's home posture: of ``samples`` seeded postures (and ``REFINEMENTS`` seeded
     perturbations of the best) inside every limit by :data:`MARGIN` of its range (unbounded
@@ -504,8 +513,8 @@ def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = No
                 home = max(good, key=lambda p: p.sigma_min)
                 home_value = home.source
             else:
-                notes.append(f"no SRDF state passes the posture rule ({', '.join(p.source for p in scored)}: "
-                             f"smallest singular values {', '.join(f'{p.sigma_min:.3g}' for p in scored)})")
+                notes.append("no SRDF state passes the posture rule: " + "; ".join(
+                    f"{p.source[5:]}: {_failed(p, length, sigma_floor)}" for p in scored))
         elif srdf is not None:
             notes.append(f"no group_state of {srdf[0].name} names every joint of the chain")
         if home is None:

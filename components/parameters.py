@@ -9,6 +9,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+#: The values an Integer parameter may take: a FMU's Integer is an fmi2Integer, 32-bit signed.
+INTEGER_RANGE = (-2**31, 2**31 - 1)
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -87,10 +90,15 @@ class Parameter:
             rules.append(f"<= {self.high:g}")
         ok = (math.isfinite(number) and (self.above is None or number > self.above)
               and (self.low is None or number >= self.low) and (self.high is None or number <= self.high))
-        if self.kind == "Integer" and ok and not number.is_integer():
-            ok, rules = False, rules + ["a whole number"]
+        shown = f"{number:g}"
+        if self.kind == "Integer" and ok:
+            if not number.is_integer():
+                ok, rules = False, rules + ["a whole number"]
+            elif not INTEGER_RANGE[0] <= number <= INTEGER_RANGE[1]:
+                ok, rules = False, [f"within {INTEGER_RANGE[0]}..{INTEGER_RANGE[1]} (a 32-bit FMI Integer)"]
+                shown = str(value) if isinstance(value, int) else shown
         if not ok:
-            raise ValueError(f"parameter {self.name} = {number:g}{unit} is invalid: must be "
+            raise ValueError(f"parameter {self.name} = {shown}{unit} is invalid: must be "
                              f"{' and '.join(rules) or 'finite'}")
         return int(number) if self.kind == "Integer" else number
 

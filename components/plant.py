@@ -82,8 +82,8 @@ class Plant:
         see :mod:`~robofmu.components.floats`); the model takes each stage's state from one
         buffer of the plant's.
 
-        Raises PlantDiverged naming the joint and the time if the state turns non-finite; the
-        state is then left as it was before the step.
+        Raises PlantDiverged naming the input that drove it (:meth:`cause`), the joint and the
+        time if the state turns non-finite; the state is then left as it was before the step.
         """
         substeps = max(1, math.ceil(h / self.max_substep - 1e-9))
         dt = h / substeps
@@ -99,29 +99,67 @@ class Plant:
             def dynamics(q, qd, tau):
                 return wrench(q, qd, tau, f_ext).tolist()
         x = self.x.tolist()
-        for _ in range(substeps):
-            write(x)
-            k1 = x[n:] + dynamics(q, qd, tau)                      # (qd, qdd) at x
-            s = list(map(add, x, map(mul, k1, half)))              # x + (dt/2) k1
-            write(s)
-            k2 = s[n:] + dynamics(q, qd, tau)
-            s = list(map(add, x, map(mul, k2, half)))
-            write(s)
-            k3 = s[n:] + dynamics(q, qd, tau)
-            s = list(map(add, x, map(mul, k3, full)))
-            write(s)
-            k4 = s[n:] + dynamics(q, qd, tau)
-            # x + (dt/6) (((k1 + 2 k2) + 2 k3) + k4), summed left to right: integrators.rk4's arithmetic
-            total = map(add, map(add, map(add, k1, map(mul, k2, two)), map(mul, k3, two)), k4)
-            x = list(map(add, x, map(mul, total, sixth)))
+        try:
+            for _ in range(substeps):
+                write(x)
+                k1 = x[n:] + dynamics(q, qd, tau)                      # (qd, qdd) at x
+                s = list(map(add, x, map(mul, k1, half)))              # x + (dt/2) k1
+                write(s)
+                k2 = s[n:] + dynamics(q, qd, tau)
+                s = list(map(add, x, map(mul, k2, half)))
+                write(s)
+                k3 = s[n:] + dynamics(q, qd, tau)
+                s = list(map(add, x, map(mul, k3, full)))
+                write(s)
+                k4 = s[n:] + dynamics(q, qd, tau)
+                # x + (dt/6) (((k1 + 2 k2) + 2 k3) + k4), summed left to right: integrators.rk4's arithmetic
+                total = map(add, map(add, map(add, k1, map(mul, k2, two)), map(mul, k3, two)), k4)
+                x = list(map(add, x, map(mul, total, sixth)))
+        except ValueError:          # a model that refuses a non-finite stage state (a parallel robot's q)
+            if np.isfinite(self._stage).all():
+                raise
+            x = self._stage.tolist()
         if not math.isfinite(sum(x)):                  # nan and inf propagate through the sum
             bad = [k for k, value in enumerate(x) if not math.isfinite(value)]
             if bad:
                 j = bad[0] % n + 1
                 what = "q" if bad[0] < n else "qd"
-                raise PlantDiverged(
-                    f"state {what}[{j}] became non-finite during the step from t = {t:.9g} s "
-                    f"to {t + h:.9g} s (joint {j}); last finite state q = {self.q.tolist()}, "
-                    f"qd = {self.qd.tolist()}")
+                state = (f"state {what}[{j}] became non-finite during the step from t = {t:.9g} s "
+                         f"to {t + h:.9g} s (joint {j} first); last finite state q = {self.q.tolist()}, "
+                         f"qd = {self.qd.tolist()}")
+                cause = self.cause(tau, f_ext)
+                raise PlantDiverged(f"{cause}: the {state}" if cause else state)
         self.x[:] = x
         return self.x
+
+    def cause(self, tau: np.ndarray, f_ext: np.ndarray | None = None) -> str:
+        """The input (``tau[i]``, ``f_ext[k]``) that drives the joints hardest at the current
+        state, if it outweighs the arm's own dynamics, in words (``input tau[2] = 1e+200 N.m is
+        too large ...``), else "": what made a step's state non-finite.
+
+        Each input's share of the joint accelerations is its column of M(q)^-1 (through J^T
+        for a wrench component) times its value; the dynamics' own is M(q)^-1 (C qd + g). The
+        shares are compared by their largest element's log10 (a share may overflow)."""
+        robot, q, qd = self.robot, self.q, self.qd
+        with np.errstate(all="ignore"):
+            inverse = np.linalg.inv(robot.mass_matrix(q))
+            drift = _log_size(inverse.dot(robot.nonlinear_effects(q, qd)))
+            shares = [(_log_size(inverse[:, i]) + _log_size(tau[i]), f"tau[{i + 1}]", float(tau[i]), unit)
+                      for i, unit in enumerate(robot.effort_units())]
+            if f_ext is not None:
+                for k, value in enumerate(np.asarray(f_ext, dtype=float)):
+                    unit_wrench = np.zeros(len(f_ext))
+                    unit_wrench[k] = 1.0
+                    column = inverse.dot(robot.wrench_torque(q, unit_wrench))
+                    shares.append((_log_size(column) + _log_size(value), f"f_ext[{k + 1}]", float(value), ""))
+        size, name, value, unit = max(shares)
+        if not size > drift:
+            return ""
+        return (f"input {name} = {value:.6g}{' ' + unit if unit else ''} is too large (it drives joint "
+                f"accelerations of about 1e{size:.0f})")
+
+
+def _log_size(values) -> float:
+    """log10 of the largest |element| of ``values`` (a number or an array); -inf for zeros."""
+    largest = float(np.max(np.abs(values)))
+    return math.log10(largest) if largest > 0.0 else -math.inf

@@ -11,6 +11,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from robofmu.components.parameters import INTEGER_RANGE
 from robofmu.system import defaults
 
 _INDEXED = re.compile(r"^(.*)\[(\d+(?:,\d+)*)\]$")       # q[2]; a matrix entry J[1,2]
@@ -124,8 +125,11 @@ def coerce(kind: str, value, what: str):
     ------
     ValueError
         Naming ``what``, if ``value`` is not a ``kind`` (a bool is no Real, 1.5 no Integer, 2
-        no Boolean, a number no String) or ``kind`` is not supported.
+        no Boolean, a number no String), an Integer is beyond 32 bits (FMI's fmi2Integer: fmpy's
+        ctypes would pass 2**32 + 3 as 3; a host that truncates so itself cannot be caught by the
+        FMU, which sees only the wrapped value) or ``kind`` is not supported.
     """
+    beyond = None
     try:
         if kind == "Real":
             if isinstance(value, bool):
@@ -134,7 +138,10 @@ def coerce(kind: str, value, what: str):
         if kind in ("Integer", "Enumeration"):
             if isinstance(value, (bool, float)) and not float(value).is_integer():
                 raise TypeError
-            return int(value)
+            number = int(value)
+            if INTEGER_RANGE[0] <= number <= INTEGER_RANGE[1]:
+                return number
+            beyond = number                     # fmpy's ctypes would wrap it silently (2**32 + 3 -> 3)
         if kind == "Boolean":
             if isinstance(value, str):
                 if value.strip().lower() not in ("true", "false", "1", "0"):
@@ -150,6 +157,9 @@ def coerce(kind: str, value, what: str):
     except (TypeError, ValueError):
         pass
     else:
+        if beyond is not None:
+            raise ValueError(f"{what} = {beyond} is out of range: an FMI {kind} is a 32-bit integer, "
+                             f"{INTEGER_RANGE[0]}..{INTEGER_RANGE[1]}")
         raise ValueError(f"{what}: unsupported type {kind}")
     raise ValueError(f"{what} is a {kind}, got {value!r}")
 

@@ -95,13 +95,15 @@ def test_diverging_plant_fails_with_time_and_joint(fmu_dir):
     with pytest.raises(FMUError) as info:
         plant.do_step(0.003, 1e-3)
     text = str(info.value)
+    assert "input tau[2] = 1e+200 N.m is too large" in text          # the input that drove it
     assert "became non-finite during the step from t = 0.003 s to 0.004 s (joint" in text
     assert plant.get("q") == q_before            # the state before the failing step is kept
     plant.close()
 
 
 def test_exception_inside_a_step_is_logged_with_its_text():
-    """Any Python exception in a step reaches the importer as a logged error with its text."""
+    """Any Python exception in a step reaches the importer as a logged error with its text, in one
+    line; its traceback follows as a debug message (fmi2OK: shown only with debug logging on)."""
     from pythonfmu.enums import Fmi2Status
 
     from robofmu.components.fmi.base import BlockSlave
@@ -118,9 +120,11 @@ def test_exception_inside_a_step_is_logged_with_its_text():
 
     s.logic.law.advance = broken
     assert s.do_step(0.0, 0.01) is False
-    (msg,) = s.log_queue
-    assert msg.status == Fmi2Status.error
-    assert "ZeroDivisionError: the integrator met a zero" in msg.msg and "Traceback" in msg.msg
+    msg, trace = s.log_queue
+    assert msg.status == Fmi2Status.error and "\n" not in msg.msg and "Traceback" not in msg.msg
+    assert msg.msg == "c: step from t = 0 s failed: ZeroDivisionError: the integrator met a zero"
+    assert trace.status == Fmi2Status.ok and "Traceback (most recent call last)" in trace.msg
+    assert trace.msg.rstrip().endswith("ZeroDivisionError: the integrator met a zero")
 
 
 def test_bundled_code_mismatch_fails_loudly(fmu_dir, tmp_path):

@@ -14,10 +14,10 @@ fmi2Reset is pythonfmu's: it constructs the slave anew.
 from __future__ import annotations
 
 import math
-import traceback
 
 from ..blocks import StepRefused
 from .quiet import quietly
+from .reporting import one_line
 
 __all__ = ["LifeCycle"]
 
@@ -67,7 +67,7 @@ class LifeCycle:
             self.logic.configure()
             self.logic.output(self.time)
         except Exception as exc:
-            self._raise_to_importer(f"initialization failed: {exc}")
+            self._raise_to_importer(f"initialization failed: {one_line(exc)}", exc)
         bad = self._nonfinite_output()
         if bad is not None:
             self._raise_to_importer(f"initialization failed: {bad}")
@@ -108,8 +108,8 @@ class LifeCycle:
                 if bad is not None:
                     return self.fail(f"input {bad} at t = {current_time:.9g} s is not finite; step refused")
                 shared.inputs_checked = 1
-            if self._feedthrough and shared.dirty:
-                self._output_safely()          # the state a feedthrough block keeps (IK's last solution)
+            if self._feedthrough and shared.dirty:   # the state a feedthrough block keeps (IK's last solution)
+                self._output_safely(announce=False)     # a failure is this step's one message
             if self._bad_output is not None:
                 return self.fail(f"t = {current_time:.9g} s: {self._bad_output}; step refused")
             quietly(self.logic.advance, current_time, step_size)
@@ -121,8 +121,12 @@ class LifeCycle:
         return True
 
     def _step_failed(self, exc: Exception, current_time: float) -> bool:
-        """The block's advance raised ``exc``: the step refused with its reason (False)."""
+        """The block's advance raised ``exc``: the step refused with its reason in one line (a
+        :class:`~robofmu.components.blocks.StepRefused` in its own words), False; an unexpected
+        exception's traceback only as a debug message (:meth:`~.reporting.Reporting._trace`)."""
         if isinstance(exc, StepRefused):
-            return self.fail(str(exc))
-        return self.fail(f"step from t = {current_time:.9g} s failed: {type(exc).__name__}: {exc}\n"
-                         f"{traceback.format_exc()}")
+            self.fail(one_line(exc))
+        else:
+            self.fail(f"step from t = {current_time:.9g} s failed: {one_line(exc)}")
+        self._trace(exc)
+        return False

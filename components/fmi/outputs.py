@@ -9,12 +9,12 @@ fail with the reason (the master then reports it); NumPy's floating-point warnin
 from __future__ import annotations
 
 import math
-import traceback
 
 import numpy as np
 from pythonfmu.enums import Fmi2Status
 
 from .quiet import quietly
+from .reporting import REFUSALS, one_line
 
 __all__ = ["Outputs"]
 
@@ -71,9 +71,11 @@ class Outputs:
             cause += f" (largest parameter {self._names[j]} = {self.values[j]:g})"
         return f"output {self._names[k]} would be {self.values[k]}{cause}"
 
-    def _output_safely(self) -> None:
+    def _output_safely(self, announce: bool = True) -> None:
         """Outputs at the current time from the current inputs; never a non-finite one: a
-        non-finite input or output holds the previous outputs and makes the next step fail."""
+        non-finite input or output, or a block's refusal of its inputs, holds the previous
+        outputs and makes the next step fail. ``announce`` False: a failure is left to the
+        step's message (fmi2DoStep's own evaluation), nothing logged here."""
         shared = self._shared
         if not shared.inputs_checked:                   # inputs set since the last check
             bad = self.nonfinite_input()
@@ -88,23 +90,34 @@ class Outputs:
         try:
             quietly(self.logic.output, self.time)    # an overflow is reported below, not as a host warning
         except Exception as exc:
-            self._output_failed(exc, held)
+            self._output_failed(exc, held, announce)
             return
-        if self._hold_nonfinite(held):
+        if self._hold_nonfinite(held, announce):
             return
         self._bad_output = None
         shared.dirty = 0                # _dirty
 
-    def _output_failed(self, exc: Exception, held: np.ndarray) -> None:
-        """Evaluating the outputs raised ``exc``: the ``held`` ones back, the reason reported."""
+    def _output_failed(self, exc: Exception, held: np.ndarray, announce: bool = True) -> None:
+        """Evaluating the outputs raised ``exc``: the ``held`` ones back and the reason, in one
+        line, for the next step's refusal. A block's refusal of its inputs (:data:`.REFUSALS`: a
+        non-unit quaternion on ``quat_ref``) is announced as a non-finite input is, one warning
+        until a step succeeds; an unexpected exception as an error, once per reason, its
+        traceback a debug message."""
         self.values[self._output_slots] = held
-        self._bad_output = f"evaluating outputs failed: {type(exc).__name__}: {exc}"
-        self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}\n"
-                 f"{traceback.format_exc()}", Fmi2Status.error)
+        refusal = isinstance(exc, REFUSALS)
+        reason = one_line(exc) if refusal else f"evaluating outputs failed: {one_line(exc)}"
+        new, self._bad_output = reason != self._bad_output, reason
+        if announce and refusal and not self._held_warned:
+            self.warn(f"t = {self.time:.9g} s: {reason}: outputs held at their last values; the next step will fail")
+            self._held_warned = True
+        elif announce and new and not refusal:
+            self.log(f"{self.instance_name}: t = {self.time:.9g} s: {reason}", Fmi2Status.error)
+        if new:
+            self._trace(exc)
 
-    def _hold_nonfinite(self, held: np.ndarray) -> bool:
+    def _hold_nonfinite(self, held: np.ndarray, announce: bool = True) -> bool:
         """If an output just computed is not finite: the ``held`` ones back, the reason
-        reported, True."""
+        reported (unless not ``announce``: left to the step's refusal), True."""
         if math.isfinite(quietly(self.values.dot, self._output_mask)):    # else every output is finite
             return False
         bad = self._nonfinite_output()
@@ -112,5 +125,6 @@ class Outputs:
             return False
         self.values[self._output_slots] = held
         self._bad_output = f"{bad}: outputs held at their last values"
-        self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
+        if announce:
+            self.log(f"{self.instance_name}: t = {self.time:.9g} s: {self._bad_output}", Fmi2Status.error)
         return True

@@ -6,6 +6,11 @@ call it is logged in. So a refused step or invalid input is fmi2Error
 (:meth:`Reporting.fail`, :meth:`Reporting._raise_to_importer`), and the instance stays usable.
 Behind pythonfmu's library alone (its win64 one, or a slave used without a FMU) only raising
 fails a call (fmi2Fatal), and a refused step is fmi2Discard.
+
+Every failure is logged in one line (:func:`one_line`). A block's refusal (:data:`REFUSALS`:
+invalid parameters or inputs, a refused step) says what is wrong in its own words; any other
+exception is unexpected and is named by its type, its traceback logged after it as a debug
+message (fmi2OK, category ``logAll``: an importer sees it only with debug logging on).
 """
 from __future__ import annotations
 
@@ -15,9 +20,10 @@ from pathlib import Path
 
 from pythonfmu.enums import Fmi2Status
 
+from ..blocks import StepRefused
 from .contract import PLATFORM, STATUS_CATEGORY, STOCK_LIBRARY
 
-__all__ = ["INTERRUPTION", "CallFailed", "Reporting", "behind_robofmu_library"]
+__all__ = ["INTERRUPTION", "REFUSALS", "CallFailed", "Reporting", "behind_robofmu_library", "one_line"]
 
 #: How a KeyboardInterrupt (Ctrl-C) raised in the block's Python code during an FMI call is
 #: logged (with fmi2Error, the call abandoned): ``"<call> " + INTERRUPTION + " at t = ..."``.
@@ -26,8 +32,21 @@ __all__ = ["INTERRUPTION", "CallFailed", "Reporting", "behind_robofmu_library"]
 INTERRUPTION = "interrupted: KeyboardInterrupt (Ctrl-C) in the block's Python code"
 
 
+#: The exceptions that are a block's refusal, not a bug: a ValueError (an invalid parameter or
+#: input, named in the message: the project's ParameterError, DescriptionError, Unreachable are
+#: ValueErrors) and a refused step (:class:`~robofmu.components.blocks.StepRefused`).
+REFUSALS = (ValueError, StepRefused)
+
+
 class CallFailed(RuntimeError):
     """The current FMI call fails; its message has been logged."""
+
+
+def one_line(exc: BaseException) -> str:
+    """``exc`` in one line: a refusal (:data:`REFUSALS`) by its message, any other exception by
+    its type and message (the message's lines joined by "; ")."""
+    text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    return text if isinstance(exc, REFUSALS) else f"{type(exc).__name__}: {text}"
 
 
 def behind_robofmu_library(resources) -> bool:
@@ -59,20 +78,32 @@ class Reporting:
     def warn(self, message: str) -> None:
         self.log(f"{self.instance_name}: {message}", Fmi2Status.warning)
 
-    def _raise_to_importer(self, message: str):
-        """Log ``message`` as an error and abandon the current FMI call, which fails with
-        fmi2Error behind robofmu's export library (the entry point returns normally, see
+    def _raise_to_importer(self, message: str, cause: BaseException | None = None):
+        """Log ``message`` as an error (and the traceback of an unexpected ``cause``, see
+        :meth:`_trace`) and abandon the current FMI call, which fails with fmi2Error behind
+        robofmu's export library (the entry point returns normally, see
         :func:`.pythonfmu_workarounds.fmi_entry`) and with fmi2Fatal behind pythonfmu's alone."""
         self._report(message)
+        if cause is not None:
+            self._trace(cause)
         raise CallFailed(f"{self.instance_name}: {message}")
 
+    def _trace(self, exc: BaseException) -> None:
+        """The traceback of an unexpected exception (not one of :data:`REFUSALS`) as a debug
+        message: fmi2OK, shown by robofmu's export library only while debug logging is on."""
+        if not isinstance(exc, REFUSALS):
+            trace = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+            self.log(f"{self.instance_name}: {trace}", Fmi2Status.ok)
+
     def _report_failure(self, exc: BaseException, call: str) -> None:
-        """Log the exception that failed ``call`` (a :class:`CallFailed` is logged already); a
-        KeyboardInterrupt as an interruption (:data:`INTERRUPTION`), which the master recognizes."""
+        """Log the exception that failed ``call`` in one line (a :class:`CallFailed` is logged
+        already); a KeyboardInterrupt as an interruption (:data:`INTERRUPTION`), which the
+        master recognizes."""
         if isinstance(exc, KeyboardInterrupt):
             self._report(f"{call} {INTERRUPTION} at t = {self.time:.9g} s; the call is abandoned")
         elif not isinstance(exc, CallFailed):
-            self._report(f"{call} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
+            self._report(f"{call} failed: {one_line(exc)}")
+            self._trace(exc)
 
     def _log_from_block(self, level: str, text: str) -> None:
         """The block's logger (``Block.logger``): its warnings and errors as the slave's messages."""

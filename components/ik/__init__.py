@@ -7,9 +7,9 @@ in ``[ik] solver = ...``.
 """
 from __future__ import annotations
 
-from .base import JOINT_UNIT, Diagnostic, IKSolver, Unreachable, make_solver, solver_class, solvers
+from .base import JOINT_UNIT, Diagnostic, IKSolver, RatesOverflow, Unreachable, make_solver, solver_class, solvers
 from . import closed_form  # noqa: F401  (registers the closed-form solvers)
 from . import newton  # noqa: F401  (registers the Newton-Raphson solver)
 from . import damped_least_squares  # noqa: F401  (registers the damped least-squares solver)
 
-__all__ = ["JOINT_UNIT", "Diagnostic", "IKSolver", "Unreachable", "make_solver", "solver_class", "solvers"]
+__all__ = ["JOINT_UNIT", "Diagnostic", "IKSolver", "RatesOverflow", "Unreachable", "make_solver", "solver_class", "solvers"]

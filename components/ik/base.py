@@ -29,6 +29,15 @@ class Unreachable(ValueError):
     """The target lies outside the workspace of the solver's branch, or on a singularity."""
 
 
+class RatesOverflow(Unreachable):
+    """The joint rates at ``q`` (n,) are not finite although the rate equations are regular there:
+    the task rates or accelerations are too large (the IK block names the input)."""
+
+    def __init__(self, message: str, q: np.ndarray):
+        super().__init__(message)
+        self.q = np.array(q, dtype=float)
+
+
 #: A diagnostic's unit that is the joints' own (rad, m; "1" for a robot with both kinds).
 JOINT_UNIT = "joint"
 
@@ -134,7 +143,8 @@ class IKSolver:
         Raises
         ------
         Unreachable
-            If A(q) is singular (or the rates are not finite).
+            If A(q) is singular (an exact zero pivot); :class:`RatesOverflow` if the rates are
+            not finite (the task rates or accelerations too large).
         """
         A, rhs, m = self._A, self._rhs, self.robot.m
         A[:m] = self.robot.jacobian(q)
@@ -148,7 +158,7 @@ class IKSolver:
         np.subtract(xdd, self.robot.jdot_qdot(q, qd), out=self._rhs_task)
         qdd = getrs(lu, pivots, rhs)[0]
         if not math.isfinite(sum(qd.tolist()) + sum(qdd.tolist())):    # nan and inf propagate
-            raise Unreachable(f"singular configuration q = {np.asarray(q).tolist()}")
+            raise RatesOverflow(f"the joint rates are not finite at q = {np.asarray(q).tolist()}", q)
         return qd, qdd
 
     def solve(self, x, xd, xdd, quaternion=None, omega=None, omegad=None):

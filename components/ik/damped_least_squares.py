@@ -59,7 +59,7 @@ from scipy.linalg.lapack import dgesdd as gesdd, dgesv as gesv, dposv as posv, d
 from ..floats import FloatWriter
 from ..orientation import rotation_of
 from ..parameters import Parameter
-from .base import JOINT_UNIT, Diagnostic, IKSolver, Unreachable
+from .base import JOINT_UNIT, Diagnostic, IKSolver, RatesOverflow, Unreachable
 
 #: Status codes (the ``status`` output).
 CONVERGED, NOT_CONVERGED, NEAR_SINGULAR, AT_LIMIT = 0, 1, 2, 3
@@ -370,7 +370,7 @@ class DampedLeastSquaresIK(IKSolver):
         report["status"] = float(status)
         if not math.isfinite(sum(qd.tolist()) + sum(qdd.tolist())):
             report["status"] = float(NOT_CONVERGED)
-            raise Unreachable(f"the rates are not finite at q = {np.round(q, 6).tolist()}")
+            raise RatesOverflow(f"the rates are not finite at q = {np.round(q, 6).tolist()}", q)
         if status != CONVERGED:
             raise Unreachable(self._why(status, q))
         return q, qd, qdd

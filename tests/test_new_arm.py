@@ -155,14 +155,9 @@ def test_the_tool_runs_the_written_move_on_its_line_and_slerp(arm):
     move = written["trajectory"]
     start = model.placement(written["configurations"]["home"])
     x_ref = result.vector("trajectory.x_ref")
-    if move["profile"] == "pose_line":
-        step = np.array(move["displacement"])
-        end = start.translation + step
-        turn = Rotation.from_rotvec(move["rotation"])
-    else:
-        np.testing.assert_allclose(move["start"], start.translation, rtol=0, atol=1e-12)
-        step = move["length"] * np.array(move["direction"]) / np.linalg.norm(move["direction"])
-        end = start.translation + step
+    step = np.array(move["displacement"])                        # a line (position task) or pose_line
+    end = start.translation + step
+    turn = Rotation.from_rotvec(move["rotation"]) if move["profile"] == "pose_line" else None
     progress = (x_ref - start.translation) @ step / (step @ step)          # s(t) along the line
     on_line = x_ref - start.translation - np.outer(progress, step)
     assert np.abs(on_line).max() < 1e-12 and progress.min() > -1e-12 and abs(progress[-1] - 1.0) < 1e-12

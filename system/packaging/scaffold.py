@@ -31,7 +31,6 @@ import json
 import math
 import os
 import re
-import secrets
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -390,10 +389,12 @@ def _move(robot, home, pose: bool, length: float, scale: float, duration: float)
     if pose:
         return {"profile": "pose_line", "displacement": [round(float(v), 4) for v in distance * d],
                 "rotation": [0.0, 0.0, scale * ROTATION], "duration": duration}
-    # a trapezoid whose ramps take a third of the duration each: v = 1.5 L / T, a = 4.5 L / T^2
-    return {"profile": "line", "start": [float(v) for v in robot.pose(np.array(home)).translation],
-            "direction": [round(float(v), 6) for v in d], "length": distance,
-            "v_max": 1.5 * distance / duration, "a_max": 4.5 * distance / duration ** 2}
+    # from the tool at home; a trapezoid whose ramps take a third of the duration each: v = 1.5 L / T,
+    # a = 4.5 L / T^2 (L the length of the rounded displacement)
+    displacement = [round(float(v), 4) for v in distance * d]
+    length = float(np.linalg.norm(displacement))
+    return {"profile": "line", "displacement": displacement, "v_max": 1.5 * length / duration,
+            "a_max": 4.5 * length / duration ** 2}
 
 
 def first_move(pose: bool) -> dict:
@@ -401,8 +402,7 @@ def first_move(pose: bool) -> dict:
     if pose:
         return {"profile": "pose_line", "displacement": [0.0, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0],
                 "duration": DURATION}
-    return {"profile": "line", "start": [0.0, 0.0, 0.0], "direction": [1.0, 0.0, 0.0], "length": 1.0,
-            "v_max": 1.0, "a_max": 1.0}
+    return {"profile": "line", "displacement": [0.0, 0.0, 0.01], "v_max": 1.0, "a_max": 1.0}
 
 
 def chain_model(urdf, chain: Chain, xacro_args: dict | None = None):
@@ -566,11 +566,11 @@ def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = No
 
 def describe_move(trajectory: dict, duration: float) -> str:
     """A move in words: its length, turn and duration."""
+    distance = float(np.linalg.norm(trajectory["displacement"]))
     if trajectory["profile"] == "pose_line":
-        distance = float(np.linalg.norm(trajectory["displacement"]))
         turn = math.degrees(trajectory["rotation"][2])
         return f"the tool moves {distance * 1000:.4g} mm in a straight line turning {turn:.4g} deg in {duration:g} s"
-    return f"the tool moves {trajectory['length'] * 1000:.4g} mm in a straight line in {duration:g} s"
+    return f"the tool moves {distance * 1000:.4g} mm in a straight line in {duration:g} s"
 
 
 def _own_words(exc: Exception, folder: str, name: str, target: Path) -> str:
@@ -599,20 +599,14 @@ def check_targets(paths, force: bool) -> None:
 
 
 def write_files(texts: dict[Path, str], force: bool = False) -> list[Path]:
-    """Write each file atomically (a temporary sibling ``.<name>.<random>.partial`` renamed into
-    place), all or none; returns the paths written."""
-    check_targets(texts, force)
-    partials = {}
-    try:
-        for path, text in texts.items():
-            path.parent.mkdir(parents=True, exist_ok=True)
-            partial = path.with_name(f".{path.name}.{secrets.token_hex(4)}.partial")
-            partials[path] = partial
-            partial.write_text(text)
-        for path, partial in partials.items():
-            os.replace(partial, path)
-    finally:
-        for partial in partials.values():
-            partial.unlink(missing_ok=True)
-    return list(texts)
+    """Write each file atomically (:func:`robofmu.system.usage.atomic_file`: a temporary sibling
+    renamed into place), every text before the first rename; returns the paths written."""
+    from contextlib import ExitStack
 
+    from robofmu.system.usage import atomic_file
+
+    check_targets(texts, force)
+    with ExitStack() as stack:
+        for path, text in texts.items():
+            stack.enter_context(atomic_file(path)).write_text(text)
+    return list(texts)

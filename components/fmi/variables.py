@@ -6,6 +6,11 @@ fmi2GetReal / fmi2SetReal is one NumPy indexing operation. Booleans live in the 
 (1.0 / 0.0), Integer and String parameters in the block's ``settings``. A value reference that
 does not name a variable of the call's type, or one not settable now, fails the call naming
 the variables.
+
+An Integer arrives as an fmi2Integer, 32 bits: a larger value is cast by the host before the call
+(fmpy's ctypes arrays pass 2**32 + 3 as 3) and cannot be told here from the value it became.
+robofmu's own conversions refuse it naming the parameter first (``robofmu.system.diagram.coerce``
+for ``--set``, experiments and ``FMUInstance.set``; ``Parameter.validate`` for a robot's TOML).
 """
 from __future__ import annotations
 

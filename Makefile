@@ -43,6 +43,7 @@ bench: $(FMU_STAMP)
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/arms.py
 	$(PY) benchmarks/sweep.py
+	$(PY) benchmarks/new_arm.py
 
 # robofmu beside the C++ floor, pydrake and bdsim + Robotics Toolbox on the same loop; each peer
 # gets its own environment under benchmarks/peers/ (not project dependencies; a few minutes once)

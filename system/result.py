@@ -152,7 +152,8 @@ def group_messages(log: list[Message], time: np.ndarray, columns: list[str], dat
                    meanings: dict[str, dict[int, str]] | None = None) -> list[MessageGroup]:
     """What the FMUs of a run said, grouped, with the excursions their health outputs recorded.
 
-    Messages of one block with one status and one :func:`message_pattern` make one group. A
+    Messages of one block with one status and one :func:`message_pattern` make one group
+    (warnings and worse: a debug message, status OK, stays in the log only). A
     message logged at a point where a recorded health output of its block (:data:`HEALTH`) is
     off starts an excursion lasting until that output is back (a block warns once per
     excursion): the group counts those points (``steps``) and ends with them. Recorded points
@@ -185,6 +186,8 @@ def group_messages(log: list[Message], time: np.ndarray, columns: list[str], dat
     covered = {column: np.zeros(len(time), dtype=bool) for column in health}
     groups: dict[tuple[str, str, str], dict] = {}
     for message in log:
+        if message.status == "OK":
+            continue
         key = (message.block, message.status, message_pattern(message.text))
         group = groups.setdefault(key, {"first": message, "count": 0, "last": message.time,
                                         "rows": np.zeros(len(time), dtype=bool), "signals": []})

@@ -224,7 +224,8 @@ def reference_check(system: System, master: Master, parameters: dict, step: floa
 
 def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus", step: float | None = None,
                    stop_time: float | None = None, algorithm: str | None = None, progress: bool = True,
-                   figures: bool = True, parameters: dict | None = None, results_format: str = "csv") -> Run:
+                   figures: bool = True, parameters: dict | None = None, results_format: str = "csv",
+                   debug: bool = False) -> Run:
     """Run experiment ``name`` and write ``out_dir/results.csv``, its figures and ``report.md``.
 
     Everything is checked before the first FMU is instantiated (see the module notes); the
@@ -251,6 +252,9 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     results_format : {"csv", "parquet"}
         ``results.csv`` (default) or ``results.parquet`` (binary, exact, with units; for large
         runs: about 30x faster to write).
+    debug : bool
+        Keep the FMUs' debug messages (a failure's traceback, ...) in ``run.log`` too
+        (:class:`Master`'s ``debug``); by default their warnings and errors only.
 
     Returns
     -------
@@ -284,7 +288,7 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
             raise UsageError(f"--set {exc}") from None
     h, stop, n = timing(system, step, stop_time)
     check_fmu_folder(system)
-    master = Master(system, progress=progress_printer(system.name) if progress else None)
+    master = Master(system, progress=progress_printer(system.name) if progress else None, debug=debug)
     try:
         warnings = master.check()
     except DiagramError as exc:

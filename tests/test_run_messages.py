@@ -289,3 +289,29 @@ def experiment_roles(system) -> list[str]:
     from robofmu.system.roles import Roles
 
     return Roles.of(system).signals()
+
+
+@pytest.mark.parametrize("debug", [False, True])
+def test_debug_keeps_the_fmus_debug_messages_in_the_log_only(ur5_fmus, monkeypatch, debug):
+    """An unexpected exception in the plant's step is logged as an error and its traceback as a
+    debug message (status OK): the log keeps the traceback only with ``debug``; the groups never."""
+    from robofmu.components.blocks import block_type
+    from robofmu.components.robots import load_description
+
+    cls = block_type(load_description("ur5"), "plant")
+    original = cls.advance
+
+    def advance(self, t, h):
+        if t >= 0.01 - 1e-12:
+            raise RuntimeError("unexpected, for the test")
+        return original(self, t, h)
+
+    monkeypatch.setattr(cls, "advance", advance)
+    master = Master(experiment.load("ur5-pose", fmu_dir=ur5_fmus), debug=debug)
+    with pytest.raises(SimulationError) as failed:
+        master.run(stop_time=0.1)
+    log = failed.value.result.log
+    traces = [m for m in log if m.status == "OK"]
+    assert [m.status for m in log if m.status != "OK"] == ["ERROR"]
+    assert bool(traces) == debug and all("Traceback" in m.text for m in traces)
+    assert [(g.block, g.status, g.count) for g in failed.value.result.messages] == [("plant", "ERROR", 1)]

@@ -42,6 +42,8 @@ def add_parser(subparsers):
                    help="set a block parameter over the experiment's (repeatable), e.g. controller.kp=400")
     p.add_argument("--format", choices=["csv", "parquet"], default="csv",
                    help="results.csv (default) or results.parquet: binary, exact, with units; for large runs")
+    p.add_argument("--debug", action="store_true",
+                   help="keep the FMUs' debug messages (a failure's traceback) in DIR/run.log too")
     p.add_argument("--strict", action="store_true",
                    help="exit with status 1 when the run did not respect its IK or limits: an FMU warning or "
                         "error, an IK status other than 0, a joint beyond its limits, or a --set reference the "
@@ -59,7 +61,7 @@ def main(args) -> int:
         parameters = dict(options.parse_setting(text) for text in args.set or [])
         run = run_experiment(args.experiment, out, fmu_dir=args.fmus, step=args.step_size,
                              stop_time=args.stop_time, algorithm=args.algorithm, parameters=parameters,
-                             results_format=args.format)
+                             results_format=args.format, debug=args.debug)
     except (SimulationError, ValueError) as exc:      # ValueError: UsageError, ExperimentError, DiagramError
         return stopped("run", exc)
     if run.said:

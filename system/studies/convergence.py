@@ -418,6 +418,8 @@ def study(experiment: str | System, step_sizes: Sequence[float] = DEFAULT_STEP_S
             say(f"[{len(runs)}/{total}] {a:12s} h = {h * 1e3:6.3g} ms: max |dq| {run.q_error:.3e} "
                 f"(t = {run.q_error_at:.3f} s), TCP {run.tcp_error * 1e3:.4f} mm, "
                 f"tracking {run.tracking * 1e3:.4f} mm  [{run.wall_time:.1f} s]")
+            for group in result.messages:          # what the FMUs of this run said
+                say(f"    {group}")
 
     gauss_seidel = {r.step_size: r.q_error for r in runs if r.algorithm == "gauss-seidel"}
     orders: dict[str, Order] = {}

@@ -12,6 +12,7 @@ the written move from FK(home), the tool on it within 0.1 mm / 0.5 mrad over the
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from importlib import metadata
 from pathlib import Path
@@ -241,3 +242,32 @@ def test_a_mistake_is_refused_in_one_line_naming_the_option(capfd, tmp_path, arg
 def test_a_name_no_model_identifier_takes_is_refused(capfd, tmp_path):
     assert_refused(capfd, ["new", "my-arm", "--urdf", f"{DIST}:xarm_description/urdf/xarm7.urdf", "--out",
                            tmp_path], "NAME", "my-arm")
+
+
+def test_a_xacro_arm_takes_its_arguments_into_the_toml(tmp_path):
+    """A .xacro copy of xarm7 whose tool link is named by an argument: --xacro-arg names it, the
+    TOML keeps xacro_args, and the robot it describes has that tool (read back by the package)."""
+    from robofmu.components.robots import load_model
+    from robofmu.components.robots.description import read
+
+    text = urdf_file("xarm_description/urdf/xarm7.urdf").read_text()
+    text = re.sub(r"<robot ([^>]*)>", r'<robot xmlns:xacro="http://www.ros.org/wiki/xacro" \1>'
+                  '<xacro:arg name="tool" default="link_eef"/>', text.replace("link_eef", "$(arg tool)"), count=1)
+    (tmp_path / "arm.urdf.xacro").write_text(text)
+    assert main(["new", "arm", "--urdf", str(tmp_path / "arm.urdf.xacro"), "--xacro-arg", "tool=flange",
+                 "--out", str(tmp_path)]) == 0
+    written = tomllib.loads((tmp_path / "arm.toml").read_text())
+    assert written["xacro_args"] == {"tool": "flange"}
+    assert (tmp_path / written["urdf"]).resolve() == (tmp_path / "arm.urdf.xacro").resolve()
+    assert written["task"]["frame"] == "flange"
+    robot = load_model(read(tmp_path / "arm.toml"))
+    assert robot.n == 7 and robot.model.existFrame("flange")
+
+
+def test_a_relative_urdf_path_is_written_relative_to_the_toml(tmp_path, monkeypatch):
+    (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "arm.urdf").write_text(urdf_file("xarm_description/urdf/xarm7.urdf").read_text())
+    monkeypatch.chdir(tmp_path)
+    assert main(["new", "arm", "--urdf", "src/arm.urdf", "--out", "robots"]) == 0
+    assert tomllib.loads((tmp_path / "robots" / "arm.toml").read_text())["urdf"] == "../src/arm.urdf"
+    assert tomllib.loads((tmp_path / "robots" / "arm-pose.toml").read_text())["robot"] == "arm.toml"

@@ -271,3 +271,27 @@ def test_a_relative_urdf_path_is_written_relative_to_the_toml(tmp_path, monkeypa
     assert main(["new", "arm", "--urdf", "src/arm.urdf", "--out", "robots"]) == 0
     assert tomllib.loads((tmp_path / "robots" / "arm.toml").read_text())["urdf"] == "../src/arm.urdf"
     assert tomllib.loads((tmp_path / "robots" / "arm-pose.toml").read_text())["robot"] == "arm.toml"
+
+
+def test_an_srdf_state_naming_the_chain_is_home_when_it_passes_the_rule(tmp_path):
+    """Panda with its SRDF and --frame panda_hand: home = "srdf:<state>", a state that names all
+    seven arm joints; the model's home is that state's numbers (read here with ElementTree), the
+    fingers off the chain locked."""
+    from robofmu.components.robots import load_model
+    from robofmu.components.robots.description import read
+
+    srdf = urdf_file("panda_description/srdf/panda.srdf")
+    assert main(["new", "panda_arm", "--urdf", f"{DIST}:panda_description/urdf/panda.urdf", "--srdf",
+                 f"{DIST}:panda_description/srdf/panda.srdf", "--frame", "panda_hand", "--out", str(tmp_path)]) == 0
+    written = tomllib.loads((tmp_path / "panda_arm.toml").read_text())
+    state = written["configurations"]["home"]
+    assert state.startswith("srdf:")
+    values = {j.get("name"): float(j.get("value"))
+              for s in ElementTree.parse(srdf).getroot().findall("group_state") if s.get("name") == state[5:]
+              for j in s.findall("joint")}
+    arm = [f"panda_joint{i}" for i in range(1, 8)]
+    assert set(arm) <= set(values)
+    robot = load_model(read(tmp_path / "panda_arm.toml"))
+    assert robot.joint_names == arm
+    np.testing.assert_allclose(robot.configuration("home"), [values[j] for j in arm], rtol=0, atol=0)
+    assert written["joints"]["chain"] == ["panda_link0", "panda_hand"]

@@ -423,6 +423,14 @@ def chain_model(urdf, chain: Chain, xacro_args: dict | None = None):
             raise ScaffoldError(_own_words(exc, folder, "inspected", urdf.path)) from None
 
 
+def _reference(path: Path, given, out: Path):
+    """How the TOML in ``out`` names a file: a distribution's ``{distribution, path}`` as given, an
+    absolute path as given, a relative one relative to ``out``."""
+    if not isinstance(given, str) or Path(given).is_absolute():
+        return given
+    return os.path.relpath(path, out.resolve())
+
+
 def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = None,
          srdf: tuple[Path, object] | None = None, xacro_args: dict | None = None) -> Plan:
     """Choose the chain, home, task and move of robot ``name`` from its URDF, check them as
@@ -474,11 +482,8 @@ def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = No
 
         states = {state: values for state, values in srdf_states(srdf[0]).items()
                   if set(chain.joints) <= set(values)}
-    if isinstance(urdf_ref, str):
-        urdf_ref = os.path.relpath(urdf_path, out.resolve()) if not Path(urdf_ref).is_absolute() else urdf_ref
-    srdf_ref = None
-    if srdf is not None:
-        srdf_ref = srdf[1] if not isinstance(srdf[1], str) else os.path.relpath(srdf[0], out.resolve())
+    urdf_ref = _reference(urdf_path, urdf_ref, out)
+    srdf_ref = None if srdf is None else _reference(srdf[0], srdf[1], out)
     placeholder = [0.0] * n
     target = out / f"{name}.toml"
 

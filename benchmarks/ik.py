@@ -29,22 +29,35 @@ H = 1e-3
 NEWTON = "newton_raphson"
 
 
-def task(robot: str) -> np.ndarray:
-    """(x, xd, xdd) rows of the robot's reference task at 1 ms, shape (steps, 3, m)."""
+#: The IK's task inputs, in the order of ``IKSolver.solve``'s arguments; a pose task's last three.
+TASK_INPUTS = ("x_ref", "xd_ref", "xdd_ref")
+POSE_INPUTS = ("quat_ref", "omega_ref", "omegad_ref")
+
+
+def task_inputs(robot: str) -> tuple[str, ...]:
+    """The IK block's inputs for the robot's task: position, or pose (a task with orientation axes)."""
+    return TASK_INPUTS + (POSE_INPUTS if load_model(robot).orientation_axes else ())
+
+
+def task(robot: str, steps: int | None = None) -> list[tuple[np.ndarray, ...]]:
+    """The robot's reference task at 1 ms (its first ``steps`` points): per step, the arguments of
+    ``IKSolver.solve``, ``(x, xd, xdd)`` or for a pose task ``(x, xd, xdd, quaternion, omega, omegad)``."""
     trajectory = make_block(robot, "trajectory")
     trajectory.configure()
+    names = task_inputs(robot)
     rows = []
-    for t in np.arange(0.0, trajectory.nominal_stop_time() + H / 2, H):
+    for t in np.arange(0.0, trajectory.nominal_stop_time() + H / 2, H)[:steps]:
         trajectory.output(t)
-        rows.append([trajectory.get("x_ref"), trajectory.get("xd_ref"), trajectory.get("xdd_ref")])
-    return np.array(rows)
+        rows.append(tuple(np.array(trajectory.get(name), dtype=float) for name in names))
+    return rows
 
 
-def applicable(robot: str, samples: np.ndarray) -> dict:
+def applicable(robot: str, samples: list) -> dict:
     """{solver kind: solver} of every solver that agrees with the robot's own at the first point."""
     model = load_model(robot)
     own = make_solver(model)
-    reference = own.position(samples[0, 0])
+    reference = own.solve(*samples[0])[0]
+    own.start_from(None)
     found = {own.kind: own}
     for kind in solvers():
         if kind in found:
@@ -55,14 +68,14 @@ def applicable(robot: str, samples: np.ndarray) -> dict:
                                             constraint_values=own.constraint_values, q_guess=tuple(reference))
             else:
                 solver = solver_class(kind)(load_model(robot))
-            if np.allclose(solver.position(samples[0, 0]), reference, atol=1e-9):
+            if np.allclose(solver.solve(*samples[0])[0], reference, atol=1e-9):
                 found[kind] = solver
         except Exception:        # the solver's geometry check refuses this robot, or no solution
             continue
     return found
 
 
-def per_step(solver, samples: np.ndarray, repeats: int) -> tuple[float, float]:
+def per_step(solver, samples: list, repeats: int) -> tuple[float, float]:
     """(best seconds per step, mean iterations per step) solving the task, warm-started."""
     best, iterations = float("inf"), 0.0
     for _ in range(repeats):
@@ -70,22 +83,22 @@ def per_step(solver, samples: np.ndarray, repeats: int) -> tuple[float, float]:
         previous = None
         count = 0.0
         t0 = time.perf_counter()
-        for x, xd, xdd in samples:
+        for inputs in samples:
             solver.start_from(previous)
-            previous, _, _ = solver.solve(x, xd, xdd)
+            previous, _, _ = solver.solve(*inputs)
             count += solver.report.get("iterations", 0.0)
         best = min(best, (time.perf_counter() - t0) / len(samples))
         iterations = count / len(samples)
     return best, iterations
 
 
-def block_per_step(robot: str, path: Path, samples: np.ndarray, repeats: int) -> tuple[float, float]:
+def block_per_step(robot: str, path: Path, samples: list, repeats: int) -> tuple[float, float]:
     """(direct, through FMI) best seconds per step of the robot's IK block along the task."""
     logic = make_block(robot, "ik")
     logic.configure()
-    slots = np.concatenate([np.arange(logic.slot(b).start, logic.slot(b).stop)
-                            for b in ("x_ref", "xd_ref", "xdd_ref")])
-    flat = samples.reshape(len(samples), -1)
+    names = task_inputs(robot)
+    slots = np.concatenate([np.arange(logic.slot(b).start, logic.slot(b).stop) for b in names])
+    flat = np.array([np.concatenate(inputs) for inputs in samples])
 
     def direct():
         logic.configure()
@@ -97,7 +110,7 @@ def block_per_step(robot: str, path: Path, samples: np.ndarray, repeats: int) ->
     fmu = FMUInstance(path, "ik")
     try:
         fmu.initialize()
-        vin = fmu.vrs("x_ref", "xd_ref", "xdd_ref")
+        vin = fmu.vrs(*names)
         vout = [v.valueReference for v in fmu.md.modelVariables if v.causality == "output" and v.type == "Real"]
         slave = fmu.slave
 
@@ -125,13 +138,17 @@ def main(argv=None) -> int:
     parser.add_argument("robots", nargs="*", help="robots (default: every described robot with an IK)")
     parser.add_argument("--fmus", default="fmus", help="FMU root folder (default fmus)")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--steps", type=int, help="the first STEPS points of each task (default: all)")
+    parser.add_argument("--quick", action="store_true", help="a smoke test: 20 points, one repeat")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.steps, args.repeats = 20, 1
     robots = args.robots or [r for r in available() if "ik" in load_description(r).blocks]
     print(f"{'robot':<12}{'solver':<16}{'us/step':>9}{'iterations':>12}{'vs closed form':>16}")
     print("-" * 65)
     blocks = []
     for robot in robots:
-        samples = task(robot)
+        samples = task(robot, args.steps)
         found = applicable(robot, samples)
         times = {kind: per_step(solver, samples, args.repeats) for kind, solver in found.items()}
         closed = [t for kind, (t, _) in times.items() if kind != NEWTON]

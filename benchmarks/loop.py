@@ -155,7 +155,10 @@ def main(argv=None) -> int:
     parser.add_argument("--step-size", type=float, help=argparse.SUPPRESS)
     parser.add_argument("--ssp", help=argparse.SUPPRESS)
     parser.add_argument("--out", help=argparse.SUPPRESS)
+    parser.add_argument("--quick", action="store_true", help="a smoke test: 0.1 s at h = 5 ms, one process each")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.stop_time, args.repeat, args.step_sizes = 0.1, 1, [5e-3]
     fmu_root = Path(args.fmus).resolve()
 
     if args.child:

@@ -82,7 +82,10 @@ def main(argv=None) -> int:
     parser.add_argument("--fmus", default="fmus", help="FMU root folder (default fmus)")
     parser.add_argument("--steps", type=int, default=2000, help="steps per repeat")
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="a smoke test: 20 steps, one repeat")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.steps, args.repeats = 20, 1
     root = Path(args.fmus)
     robots = args.robots or available()
     rows = []

@@ -52,7 +52,10 @@ def main(argv=None) -> int:
     parser.add_argument("--fmus", default="fmus")
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=9)
+    parser.add_argument("--quick", action="store_true", help="a smoke test: 20 steps, one repeat")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.steps, args.repeats = 20, 1
     system = experiment.load(args.experiment, fmu_dir=args.fmus)
     robot = system.extra["robot"]
     master = Master(system)

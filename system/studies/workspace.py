@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from robofmu.system.analysis import markdown_table
-from robofmu.system.usage import UsageError
+from robofmu.system.usage import UsageError, check_memory
 from robofmu.system.studies.tables import STUDIES_DIR
 
 #: The vectorized kinematics the analysis needs of a robot model.
@@ -119,6 +119,9 @@ def read_study(path: str | Path) -> Study:
         if not values or (size and len(values) != size) or not all(
                 isinstance(v, int) and not isinstance(v, bool) and v >= 2 for v in values):
             raise UsageError(f"{path}: grids.{key}: must be {size or 'some'} whole numbers >= 2, got {values!r}")
+    for key, need in grid_memory(grids).items():
+        shown = grids[key] if key != "rays" else [grids["rays"], grids["ray_orientations"]]
+        check_memory(need, f"{path}: grids.{key} = {shown}", "give a smaller grid")
     length = _need(data, "characteristic_length", (int, float, str), path)
     if not isinstance(length, str) and not (math.isfinite(length) and length > 0):
         raise UsageError(f"{path}: characteristic_length: must be a length > 0 m, got {length!r}")
@@ -144,6 +147,24 @@ def read_study(path: str | Path) -> Study:
                  data.get("text", ""), length, data.get("characteristic_length_text", ""),
                  None if centre is None else (float(centre[0]), float(centre[1])), math.radians(theta),
                  dict(grids), regions, dict(data.get("expected", {})), dict(data.get("notes", {})))
+
+
+#: Bytes held per grid point while a grid is evaluated (bounded above): float64 arrays of the
+#: poses, their broadcast copies, masks and results; a joint grid's chunk holds its Jacobians and
+#: singular values on up to four threads.
+BYTES_PER_POINT, BYTES_PER_CONFIGURATION = 96, 1024
+
+
+def grid_memory(grids: dict) -> dict[str, int]:
+    """Bytes each of a study's grids needs at once (keys of ``[grids]``; ``rays`` covers the rays
+    times ``ray_orientations``), so that a grid that cannot fit is refused before it is allocated."""
+    r, b, t = grids["region"]
+    largest = max(grids["joint"])
+    return {"positions": BYTES_PER_POINT * grids["positions"] ** 2,
+            "isotropy_positions": BYTES_PER_POINT * grids["isotropy_positions"] ** 2,
+            "rays": BYTES_PER_POINT * grids["rays"] * max(grids["ray_orientations"], ZOOM_POINTS),
+            "region": BYTES_PER_POINT * r * b * t,
+            "joint": BYTES_PER_POINT * largest ** 2 + BYTES_PER_CONFIGURATION * max(CHUNK, largest ** 2)}
 
 
 def studies() -> dict[str, Path]:

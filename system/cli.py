@@ -3,9 +3,12 @@
 Exit status and messages, for every command:
 
 - **2**: a mistake in what was asked (an unknown experiment or robot, an experiment file that
-  cannot be used, a bad option value, an FMU folder that is missing or stale, an output path
-  that cannot be written), found before anything runs; one line ``robofmu <command>: ...``
-  naming the file, key or option, never a traceback. argparse's own errors (an unknown
+  cannot be used, a bad option value, a count or grid that would not fit in memory, an FMU folder
+  that is missing or stale, an output path that cannot be written or holds a file robofmu did
+  not write, a scheduler that refuses the connection), found before anything runs; one line
+  ``robofmu <command>: ...`` naming the file, key or option, never a traceback. Each FMU,
+  SSP package, container, CSV and report is written whole or not at all (a temporary sibling
+  renamed into place), so Ctrl-C leaves the earlier file or none. argparse's own errors (an unknown
   option, a value that is no number) also exit 2, after a usage line.
 - **1**: the work itself failed (a co-simulation step, an FMU that fails to initialize; for
   ``doctor``: a problem found), one line per failure.

@@ -42,9 +42,11 @@ __all__ = ["Run", "figures_of", "progress_printer", "reference_check", "run_expe
            "summary_line"]
 
 
-def progress_printer(label: str, stream=sys.stderr):
-    """A ``progress(fraction, t)`` callback printing one updating line."""
+def progress_printer(label: str, stream=None):
+    """A ``progress(fraction, t)`` callback printing one updating line (on ``stream``, default the
+    ``sys.stderr`` of the moment it is made, not of the moment this module was imported)."""
     start = time.perf_counter()
+    stream = sys.stderr if stream is None else stream
 
     tty = stream.isatty()
 

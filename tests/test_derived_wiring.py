@@ -26,8 +26,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import robofmu.system.run  # noqa: F401  (imported at collection: its progress_printer binds sys.stderr at import,
-#                            and a first import inside capfd would bind a stream closed after the test)
 from robofmu.components.blocks import make_block
 from robofmu.components.robots import available, load_description
 from robofmu.system import experiment

@@ -25,8 +25,8 @@ import math
 from pathlib import Path
 
 from robofmu.system import defaults, options
-from robofmu.system.usage import UsageError, atomic_file, check_fmu_folder, check_times, check_writable, one_line, say, \
-    stopped
+from robofmu.system.usage import UsageError, atomic_file, check_fmu_folder, check_memory, check_times, check_writable, \
+    one_line, say, stopped
 
 HELP = "co-simulate a joint reference step and compare it with linear predictions"
 
@@ -176,8 +176,8 @@ def _robot(args):
 #: Largest reference step on a joint without position limits, by joint unit: one turn, 1 m.
 UNBOUNDED_AMPLITUDE = {"rad": 2.0 * math.pi, "m": 1.0}
 
-#: Bytes of memory per communication step and joint: the recording (q and tau, 8 bytes each),
-#: the three linear predictions and the comparison's copies, about four times over.
+#: Bytes of memory per communication step and joint: five float64 series (the recorded q and tau,
+#: the three linear predictions), about four times over for the comparison's copies.
 BYTES_PER_STEP_AND_JOINT = 4 * 8 * 5
 
 
@@ -217,7 +217,6 @@ def _stop_time(args, design, joints: int) -> float:
     number of steps; UsageError naming ``--step-size`` and ``--stop-time`` for a step longer than
     the run, and for a run whose recording would not fit in memory."""
     from robofmu.system.check import step_count
-    from robofmu.system.usage import check_memory
 
     stop_time = args.stop_time
     if stop_time is None:

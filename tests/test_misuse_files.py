@@ -159,9 +159,19 @@ UNWRITABLE = {
 }
 
 
-@pytest.mark.parametrize("case", UNWRITABLE)
+#: The commands whose --out is a folder replaced whole (OutputFolder): they refused an unwritable
+#: --out with status 2 before issue 29 already; here so that every command with --out is covered.
+UNWRITABLE_FOLDERS = {
+    "run": ["run", EXPERIMENT, "--fmus", "{fmus}", "--out", "{out}"],
+    "workspace": ["workspace", "3rrp", "--out", "{out}"],
+    "convergence": ["convergence", EXPERIMENT, "--fmus", "{fmus}", "--out", "{out}"],
+    "demo": ["demo", "--quick", "--out", "{out}"],
+}
+
+
+@pytest.mark.parametrize("case", [*UNWRITABLE, *UNWRITABLE_FOLDERS])
 def test_an_unwritable_out_is_refused_with_status_2(capfd, tmp_path, fmu_root, case):
     out = unwritable(tmp_path)
-    argv = [str(a).format(out=out, fmus=fmu_root) for a in UNWRITABLE[case]]
+    argv = [str(a).format(out=out, fmus=fmu_root) for a in {**UNWRITABLE, **UNWRITABLE_FOLDERS}[case]]
     given = argv[argv.index("--out") + 1]
     assert_refused(capfd, argv, f"--out {given}", folders=[tmp_path])

@@ -1,7 +1,11 @@
-"""Computed-torque control: tau = M(q) (qdd_ref + kd e_dot + kp e + ki z) + N(q, qd).
+"""Computed-torque control: tau = M(q) (qdd_ref + kd e_dot + kp e + ki z) + N(q, qd) + tau_f(qd).
 
 e = q_ref - q, z = integral of e dt. With a perfect model every joint's error obeys
-e_ddot + kd e_dot + kp e + ki z = 0 (z_dot = e).
+e_ddot + kd e_dot + kp e + ki z = 0 (z_dot = e). M includes the model's armature; tau_f is the
+joints' damping and friction as the controller believes them
+(:class:`~robofmu.components.plant.JointLosses`; none: no compensation). Losses the controller
+does not know leave e_ddot + kd e_dot + kp e + ki z = (M^-1 tau_f)(q, qd), e.g. a steady error
+tau_c / (M_jj kp) of a PD on a decoupled joint moving at constant speed.
 
 The gains' rule
 ---------------
@@ -31,6 +35,7 @@ from .floats import FloatWriter
 from .parameters import Parameter, ParameterError
 
 if TYPE_CHECKING:
+    from .plant import JointLosses
     from .robots.model import RobotModel
 
 __all__ = ["GAINS", "check_gains", "ComputedTorque"]
@@ -73,6 +78,9 @@ class ComputedTorque:
     kp, kd, ki : float
         Gains (1/s^2, 1/s, 1/s^3), the same on every joint, by the rule of :func:`check_gains`
         (ParameterError naming the gain otherwise).
+    losses : JointLosses, optional
+        The joints' damping and friction the controller compensates (added to its effort at the
+        measured qd); None or all zero: none.
 
     Notes
     -----
@@ -82,8 +90,9 @@ class ComputedTorque:
     recursive Newton-Euler pass on a serial robot instead of M(q) (CRBA) and N(q, qd) apart.
     """
 
-    def __init__(self, robot: RobotModel, kp: float, kd: float, ki: float = 0.0):
+    def __init__(self, robot: RobotModel, kp: float, kd: float, ki: float = 0.0, losses: JointLosses | None = None):
         self.robot = robot
+        self.losses = losses if losses is not None and losses.active else None
         self.kp, self.kd, self.ki = check_gains(kp, kd, ki)
         self.z = np.zeros(robot.n)
         self._command = np.zeros(robot.n)
@@ -108,6 +117,8 @@ class ComputedTorque:
             u = [v + z * ki for v, z in zip(u, self.z.tolist())]
         self._write_command(u)
         self.robot.inverse_dynamics_into(q, qd, self._command, out)    # M(q) u + N(q, qd) in one pass (RNEA)
+        if self.losses is not None:
+            out += self.losses.torque(qd)
 
     def advance(self, q_ref, q, h: float) -> None:
         """Integrate the error over a step of ``h`` seconds (error held at its current value):

@@ -1,4 +1,4 @@
-"""Controller block: computed torque, tau = M(q)(qdd_ref + kd e' + kp e + ki z) + N(q, qd).
+"""Controller block: computed torque, tau = M(q)(qdd_ref + kd e' + kp e + ki z) + N(q, qd) + tau_f(qd).
 
 ``gain_scale`` (> 0) multiplies the three gains (a loop-gain knob for sweeps; 1 leaves them as
 given). The gains start at the robot description's ``default_gains`` set and follow the gains'
@@ -9,6 +9,12 @@ position inputs q_ref and q start at the robot's home configuration (the rest at
 controller holds home with tau = g(home). For a robot
 with a payload the model carries ``payload_mass`` while ``grip`` is true (0 by default: the
 controller does not know the payload).
+The controller's model of the joints' losses is its own: parameters ``damping[j]``,
+``friction[j]``, ``friction_velocity[j]`` and (where the model takes one) ``armature[j]``, declared
+as the plant's are and starting at the robot's data (known to the controller), so that an
+experiment can make its model differ from the plant's; ``loss_compensation`` scales the damping
+and friction it adds, tau_f = c (b qd + tau_c tanh(qd / v_s)) at the measured qd: 1 (default)
+compensates them, 0 leaves the losses unknown to it (the armature stays in its M).
 Where the robot description asks for it (``[joints] saturate_effort = true``), tau is clipped to
 the joints' effort limits and the output ``saturated`` is true while any joint is clipped (one
 warning per excursion, naming the joint and the time).
@@ -18,7 +24,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..control import GAINS, ComputedTorque
+from ..plant import JointLosses
 from .base import ContinuousBlock, vector_names
+from .plant import configured_losses, declare_losses
 
 
 class ControllerBlock(ContinuousBlock):
@@ -56,14 +64,20 @@ class ControllerBlock(ContinuousBlock):
         if self.saturates:
             self.saturated = self.boolean("saturated", "output", "True while an effort is clipped to its "
                                           "joint's effort limit", depends=inputs)
+        self.has_armature = declare_losses(self)
+        self.real("loss_compensation", "parameter", "1", "Scales the damping and friction the controller adds "
+                  "(1: the losses known to it, 0: unknown)", 1.0, low=0.0)
         self.law = None
 
     def configure(self):
         self.robot.set_gravity(self.parameter("g"))
         self.payload_mass = self.parameter("payload_mass") if self.has_payload else 0.0
         scale = self.parameter("gain_scale")
+        losses = configured_losses(self, self.has_armature)
+        known = self.parameter("loss_compensation")
+        losses = JointLosses(known * losses.damping, known * losses.friction, losses.velocity_scale)
         self.law = ComputedTorque(self.robot, scale * self.parameter("kp"), scale * self.parameter("kd"),
-                                  scale * self.parameter("ki"))
+                                  scale * self.parameter("ki"), losses)
         v = self.values                          # views, made once (the values array is never replaced)
         self._inputs = tuple(v[s] for s in (self.q_ref, self.qd_ref, self.qdd_ref, self.q, self.qd))
         self._tau_out = v[self.tau]

@@ -29,6 +29,10 @@ UNITS = {
     "1/s3": {"s": -3},
     "m/rad": {"m": 1, "rad": -1},       # Jacobian entries: task unit over joint unit
     "rad/m": {"rad": 1, "m": -1},
+    "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},     # joint damping, friction, armature, encoder
+    "N.s/m": {"kg": 1, "s": -1},
+    "kg.m2": {"kg": 1, "m": 2},
+    "1/m": {"m": -1},
 }
 
 #: Tool name of the vendor annotation that tells robot and block kind of a FMU.

@@ -38,6 +38,10 @@ Schema (every table but those marked optional is required)::
     lower = -2.0                         # rad or m; upper too; velocity (rad/s, m/s); effort
     velocity = 3.0                       # (N.m, N); inf: none. A URDF joint whose position
                                          # limits are [0, 0] (its <limit> gives none) is unlimited
+    [joints.dynamics.elbow]              # a joint's losses and rotor inertia (the plant's defaults,
+    damping = 0.5                        # over the URDF's <dynamics>): viscous damping (N.m.s/rad,
+    friction = 0.2                       # N.s/m), Coulomb friction (N.m, N), armature (rotor
+    armature = 0.01                      # inertia at the joint, kg m^2 or kg); each >= 0
 
     [configurations]
     home = [0.0, 0.0, 0.125]             # joint positions (rad, m); `home` is required; any
@@ -270,6 +274,10 @@ class RobotDescription:
         (rad, m), ``velocity`` (rad/s, m/s), ``effort`` (N.m, N); inf: none).
     saturate_effort : bool
         Whether the controller clips its efforts to the effort limits.
+    joint_dynamics : dict of str to dict of str to float
+        Losses and rotor inertia by joint that replace the URDF's (``[joints.dynamics.<joint>]``:
+        ``damping`` (N.m.s/rad, N.s/m), ``friction`` (N.m, N), ``armature`` (kg m^2, kg); each
+        finite and >= 0).
     mechanism : Planar3RRPMechanism or None
         The closed-chain mechanism's parameters (``[mechanism]``); None for a URDF robot.
     """
@@ -294,6 +302,7 @@ class RobotDescription:
     tables: tuple[str, ...] = ()
     joint_limits: dict[str, dict[str, float]] = field(default_factory=dict)
     saturate_effort: bool = False
+    joint_dynamics: dict[str, dict[str, float]] = field(default_factory=dict)
     xacro_args: dict[str, str] = field(default_factory=dict)
     srdf: Path | None = None
     states: dict[str, dict[str, float]] = field(default_factory=dict)
@@ -696,12 +705,12 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
     if ("ik" in blocks) != (ik is not None):
         top.fail("ik", "an [ik] table is needed exactly when `blocks` lists 'ik'")
 
-    locked, limits, saturate, chain = {}, {}, False, None
+    locked, limits, saturate, chain, losses = {}, {}, False, None, {}
     joints = top.table("joints", None)
     if joints is not None:
         if mechanism is not None:
             top.fail("joints", "a [mechanism] describes its joints in its own table")
-        joints.unknown({"locked", "limits", "saturate_effort", "chain"})
+        joints.unknown({"locked", "limits", "saturate_effort", "chain", "dynamics"})
         if "chain" in joints.data:
             chain = joints.strings("chain", _REQUIRED)
             if len(chain) != 2:
@@ -716,6 +725,11 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
             low, high = limits[joint].get("lower", -math.inf), limits[joint].get("upper", math.inf)
             if not low < high:
                 table.fail("upper", f"must exceed lower, got {high!r} <= {low!r}")
+        given = joints.table("dynamics", {})
+        for joint in given.data:
+            table = given.table(joint, _REQUIRED)
+            table.unknown(set(DYNAMICS_KEYS))
+            losses[joint] = {key: table.number(key, _REQUIRED, low=0.0) for key in DYNAMICS_KEYS if key in table.data}
         saturate = joints.data.get("saturate_effort", False)
         if not isinstance(saturate, bool):
             joints.fail("saturate_effort", f"must be true or false, got {saturate!r}")
@@ -738,7 +752,7 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
         gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
         trajectory=trajectory, ik=ik,
         mechanism=mechanism, locked=locked, profiles=profiles, tables=tuple(dict.fromkeys(tables)),
-        joint_limits=limits, saturate_effort=saturate, xacro_args=xacro_args, srdf=srdf, states=states,
+        joint_limits=limits, saturate_effort=saturate, joint_dynamics=losses, xacro_args=xacro_args, srdf=srdf, states=states,
         srdf_configurations=named_states, chain=chain)
     if not named_states:
         return description
@@ -751,6 +765,10 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
 
 #: A configuration given as ``"srdf:<state>"`` is the SRDF's group_state of that name.
 SRDF_PREFIX = "srdf:"
+
+
+#: The keys of a ``[joints.dynamics.<joint>]`` table.
+DYNAMICS_KEYS = ("damping", "friction", "armature")
 
 
 #: The keys of a ``[joints.limits.<joint>]`` table.

@@ -175,6 +175,29 @@ def _set_limits(model: pin.Model, description: RobotDescription, urdf: Urdf) -> 
         setattr(model, name, arrays[key])
 
 
+def _set_dynamics(model: pin.Model, description: RobotDescription, urdf: Urdf) -> None:
+    """The joints' losses and rotor inertias as data, in Pinocchio's ``damping``, ``friction`` and
+    ``armature`` (one per velocity coordinate): the checked URDF's ``<dynamics>`` (damping,
+    friction; no armature), the description's ``[joints.dynamics.<joint>]`` over them. Pinocchio's
+    CRBA, RNEA, ABA and kinetic energy add ``armature`` to M's diagonal; ``damping`` and
+    ``friction`` are data only (the plant and the controller apply them)."""
+    fields = {"damping": "damping", "friction": "friction", "armature": "armature"}
+    arrays = {key: np.zeros(model.nv) for key in fields}
+    for j in range(1, model.njoints):
+        if model.joints[j].nv == 1 and model.names[j] in urdf.joints:
+            for key in ("damping", "friction"):
+                arrays[key][model.joints[j].idx_v] = getattr(urdf.joints[model.names[j]], key)
+    for joint, values in description.joint_dynamics.items():
+        j = model.getJointId(joint) if model.existJointName(joint) else 0
+        if j == 0 or model.joints[j].nv != 1:
+            raise ValueError(f"{description.path}: joints.dynamics.{joint}: no joint {joint!r} moves in the model of "
+                             f"{urdf.path.name} (its joints: {', '.join(n for n in model.names[1:])})")
+        for key, value in values.items():
+            arrays[key][model.joints[j].idx_v] = value
+    for key, name in fields.items():
+        setattr(model, name, arrays[key])
+
+
 def reduced_model(description: RobotDescription) -> tuple[pin.Model, Urdf]:
     """The model of the robot's free joints (locked ones and those off ``[joints] chain`` removed),
     its limits set, and the checked URDF it comes from. ValueError naming the file and key."""
@@ -187,6 +210,7 @@ def reduced_model(description: RobotDescription) -> tuple[pin.Model, Urdf]:
         raise ValueError(f"{description.path}: {keys}: no joint is left to move (every movable joint of "
                          f"{urdf.path.name} is locked); unlock one")
     _set_limits(model, description, urdf)
+    _set_dynamics(model, description, urdf)
     return model, urdf
 
 
@@ -304,7 +328,18 @@ class SerialRobot(RobotModel):
         """The URDF's joint effort limits (Pinocchio's effortLimit)."""
         return self.model.effortLimit.copy()
 
+    def joint_losses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The robot data's viscous damping (N.m.s/rad, N.s/m), Coulomb friction (N.m, N) and
+        armature (kg m^2, kg) per joint, each shape (n,) (new arrays): the URDF's ``<dynamics>``,
+        the description's ``[joints.dynamics]`` over them; armature as last set."""
+        return self.model.damping.copy(), self.model.friction.copy(), self.model.armature.copy()
+
     # -- parameters -------------------------------------------------------------------------
+    def set_armature(self, armature) -> None:
+        """Rotor inertia reflected at each joint (kg m^2 or kg), shape (n,): added to M(q)'s
+        diagonal by Pinocchio's CRBA, RNEA, ABA and kinetic energy."""
+        self.model.armature = np.array(armature, dtype=float)
+
     def set_gravity(self, magnitude: float) -> None:
         self.gravity = float(magnitude)
         self.model.gravity.linear = self.gravity * self._direction

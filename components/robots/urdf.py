@@ -62,6 +62,9 @@ class UrdfJoint:
         The leader's name (None for a fixed joint's ignored mimic).
     multiplier, offset : float
         The mimic relation q = multiplier * q_leader + offset (rad or m).
+    damping, friction : float
+        ``<dynamics damping= friction=>``: viscous damping (N.m.s/rad or N.s/m) and Coulomb
+        friction (N.m or N), each >= 0; 0 where the URDF gives none.
     """
 
     name: str
@@ -76,6 +79,8 @@ class UrdfJoint:
     mimic: str | None
     multiplier: float = 1.0
     offset: float = 0.0
+    damping: float = 0.0
+    friction: float = 0.0
 
     @property
     def movable(self) -> bool:
@@ -297,10 +302,13 @@ def _joint(path: Path, element, name: str) -> UrdfJoint:
         for key, value in (("velocity", velocity), ("effort", effort)):
             if value < 0.0:
                 numbers.fail(f"limit {key} {value:g} is negative", "give a limit >= 0 (0: none)")
+    losses = {"damping": 0.0, "friction": 0.0}
     dynamics = element.find("dynamics")
     if dynamics is not None:
-        numbers.one(dynamics, "dynamics", "damping", 0.0)
-        numbers.one(dynamics, "dynamics", "friction", 0.0)
+        for key in losses:
+            losses[key] = numbers.one(dynamics, "dynamics", key, 0.0)
+            if losses[key] < 0.0:
+                numbers.fail(f"dynamics {key} {losses[key]:g} is negative", "give a coefficient >= 0 (0: none)")
     mimic, multiplier, offset = None, 1.0, 0.0
     tag = element.find("mimic")
     if tag is not None and kind != "fixed":
@@ -313,7 +321,7 @@ def _joint(path: Path, element, name: str) -> UrdfJoint:
         lower, upper = -math.inf, math.inf
     return UrdfJoint(name, kind, ends["parent"], ends["child"], axis, lower, upper,
                      velocity if velocity > 0.0 else math.inf, effort if effort > 0.0 else math.inf,
-                     mimic, multiplier, offset)
+                     mimic, multiplier, offset, losses["damping"], losses["friction"])
 
 
 def expand_xacro(path: str | Path, xacro_args: dict | None = None) -> bytes:

@@ -1,0 +1,336 @@
+"""The sampled, delayed computed-torque loop: python-control's prediction and its stability limit.
+
+:func:`~.linear.discrete_prediction` models a controller that samples at the communication step
+h. Here the controller runs at its own ``sample_time`` Ts = N h (N a positive integer) and its
+effort may arrive ``delay_steps`` = d controller samples late. Per joint, with y = q - q0 and a
+reference step r from t = 0 (see :mod:`.linear`):
+
+Plant, integrated at h
+    y'' = u - beta y', beta = ``damping`` (1/s): viscous friction b per unit inertia that the
+    controller does not compensate (beta = 0: the perfect model). u is held over each
+    controller period [t_k, t_k + Ts), t_k = k Ts, so the plant sees a zero-order hold at Ts
+    whatever its own step h < Ts:
+
+        x_{k+1} = Phi x_k + Gamma u_k,  x = (y, y'),  (Phi, Gamma) = ``control.c2d(plant, Ts, 'zoh')``
+
+    (beta = 0: Phi = [[1, Ts], [0, 1]], Gamma = [Ts^2 / 2, Ts]). Between two controller samples
+    the plant's state at t_k + j h is exactly (Phi(j h), Gamma(j h)) applied to (x_k, u_k): the
+    co-simulation's records at the base step are predicted exactly, not interpolated.
+Controller, sampled at Ts
+    v_k = kp (r - y_k) - kd y'_k + ki z_k,   z_{k+1} = z_k + Ts (r - y_k).
+Delay
+    u_k = v_{k-d} (v computed from the samples at t_k is output at t_{k+d}), a shift register
+    of d states (z^-d); before t_d the plant receives the effort computed before the step,
+    u = 0 (tau = the computed torque of the resting arm).
+
+With Ts = h and d = 0 this is :func:`~.linear.discrete_prediction`. For PD and beta = 0 the
+closed loop's characteristic polynomial is, with T = Ts,
+
+    z^d (z - 1)^2 + kd T (z - 1) + kp T^2 (z + 1) / 2 = 0
+
+(PID: z^d (z - 1)^3 + kd T (z - 1)^2 + (T^2 / 2)(z + 1)(kp (z - 1) + ki T) = 0). Its Jury
+conditions give the stability limit in closed form for d = 0, kp < 2 kd / T (with kd T < 2), and
+for d = 1, kp < (2 q - 3 + sqrt(9 - 8 q)) / T^2 with q = kd T, about a third of it (2 kd / (3 T)
+for small q). :func:`largest_stable_kp` finds the limit for any d, ki and beta from
+python-control's discrete poles.
+
+Friction the controller does not know
+    Viscous b: the ``damping`` above, beta = b / m. Coulomb tau_c: at rest a PD balances it with
+    its proportional term, m kp e = tau_c, so the joint stops short of the reference by
+    e = tau_c / (m kp) (:func:`friction_steady_state_error`); a PID's integral removes it. m is
+    the joint's inertia at the operating point: 1 / (M^-1)_jj, which is M_jj for a decoupled
+    joint (in general the errors at rest are kp e = M^-1 tau_f, a vector). The plant's smooth
+    Coulomb model tau_c tanh(qd / v_s) has no stiction: at rest it is a viscous term of slope
+    tau_c / v_s, so inside the stick band the error creeps to zero with the time constant of
+    :func:`friction_creep_time` instead of staying. None of this is in the linear prediction,
+    which settles at r: its miss is e.
+
+The gains follow :func:`robofmu.components.control.check_gains`; other arguments are refused
+with a ValueError naming the argument.
+"""
+from __future__ import annotations
+
+import math
+import operator
+
+import control
+import numpy as np
+from scipy.optimize import brentq
+
+from robofmu.components.control import check_gains
+
+__all__ = ["sampled_prediction", "predict_sampled", "spectral_radius", "largest_stable_kp",
+           "friction_steady_state_error", "friction_creep_time"]
+
+
+def _positive(name: str, value: float, unit: str, zero: bool = False) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and (value >= 0.0 if zero else value > 0.0)):
+        raise ValueError(f"{name} must be {'>= 0' if zero else '> 0'} {unit}, got {value:g}")
+    return value
+
+
+def _delay(delay_steps) -> int:
+    try:
+        d = operator.index(delay_steps)
+    except TypeError:
+        raise ValueError(f"delay_steps must be an integer >= 0, got {delay_steps!r}") from None
+    if isinstance(delay_steps, bool) or d < 0:
+        raise ValueError(f"delay_steps must be an integer >= 0, got {delay_steps!r}")
+    return d
+
+
+def _plant(damping: float) -> control.StateSpace:
+    """y'' = u - damping y' with outputs (y, y')."""
+    return control.ss([[0.0, 1.0], [0.0, -damping]], [[0.0], [1.0]], np.eye(2), np.zeros((2, 1)),
+                      inputs="u", outputs=["y", "yd"], name="plant")
+
+
+def _closed_loop(plant: control.StateSpace, kp: float, kd: float, ki: float, d: int) -> control.StateSpace:
+    """The loop of the discretized ``plant`` (dt = Ts), input r, outputs (y, y', u applied).
+
+    States: (y, y'), then z if ki > 0, then the delay line (newest effort first)."""
+    ts = plant.dt
+    ctrl_out = "v" if d else "u"
+    if ki == 0.0:
+        ctrl = control.ss(np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((1, 0)), [[kp, -kp, -kd]], dt=ts,
+                          inputs=["r", "y", "yd"], outputs=ctrl_out, name="ctrl")
+    else:
+        ctrl = control.ss([[1.0]], [[ts, -ts, 0.0]], [[ki]], [[kp, -kp, -kd]], dt=ts,
+                          inputs=["r", "y", "yd"], outputs=ctrl_out, name="ctrl")
+    parts = [plant, ctrl]
+    if d:
+        parts.append(control.ss(np.eye(d, k=-1), np.eye(d, 1), np.eye(1, d, k=d - 1), np.zeros((1, 1)), dt=ts,
+                                inputs="v", outputs="u", name="delay"))
+    return control.interconnect(parts, inplist="r", outlist=["y", "yd", "u"], inputs="r",
+                                outputs=["y", "yd", "u"])
+
+
+def _discrete_plant(sample_time, damping) -> tuple[control.StateSpace, control.StateSpace, float, float]:
+    ts = _positive("sample_time", sample_time, "s")
+    beta = _positive("damping", damping, "1/s", zero=True)
+    continuous = _plant(beta)
+    return continuous, control.c2d(continuous, ts, method="zoh"), ts, beta
+
+
+def sampled_prediction(kp: float, kd: float, ki: float, sample_time: float, delay_steps: int = 0,
+                       damping: float = 0.0) -> control.StateSpace:
+    """The loop sampled at ``sample_time`` with ``delay_steps`` of delay, at its samples.
+
+    Parameters
+    ----------
+    kp, kd, ki : float
+        Gains (1/s^2, 1/s, 1/s^3); ``ki = 0`` for PD (no integral state).
+    sample_time : float
+        The controller's sample time Ts (s), > 0; the effort is held over it.
+    delay_steps : int
+        d >= 0: the effort computed from the samples at t_k is applied from t_{k+d}.
+    damping : float
+        beta = b / m (1/s), >= 0: viscous friction per unit inertia, unknown to the controller.
+
+    Returns
+    -------
+    control.StateSpace
+        Discrete (``dt = sample_time``), input r (reference relative to the start, joint unit),
+        output y at t_k (same unit); states (y, y'[, z], delayed efforts). With Ts = h, d = 0
+        and beta = 0 it is :func:`~.linear.discrete_prediction` (same states, same matrices).
+    """
+    kp, kd, ki = check_gains(kp, kd, ki)
+    d = _delay(delay_steps)
+    _, plant, ts, _ = _discrete_plant(sample_time, damping)
+    loop = _closed_loop(plant, kp, kd, ki, d)
+    return control.ss(loop.A, loop.B, loop.C[:1], loop.D[:1], dt=ts)
+
+
+def predict_sampled(kp: float, kd: float, ki: float, t: np.ndarray, amplitude: float = 1.0,
+                    sample_time: float | None = None, delay_steps: int = 0, damping: float = 0.0,
+                    h: float | None = None) -> np.ndarray:
+    """Predicted y(t) = q(t) - q0 after a reference step, on the base-step grid of the co-simulation.
+
+    The loop of :func:`sampled_prediction` gives the state at the controller's samples; between
+    them the ZOH'd plant (``control.c2d`` at j h) gives the exact values at t_k + j h,
+    j = 0 .. N - 1, computed as one lifted system (N outputs, dt = Ts) and interleaved.
+
+    Parameters
+    ----------
+    kp, kd, ki : float
+        Gains (1/s^2, 1/s, 1/s^3).
+    t : array_like, shape (n,)
+        Times (s) from the step: ``t[k] = t[0] + k h``.
+    amplitude : float
+        Step size A (joint unit: rad or m).
+    sample_time : float, optional
+        Controller sample time Ts (s), an integer multiple N of ``h``; default ``h``.
+    delay_steps : int
+        d, in controller samples.
+    damping : float
+        beta (1/s), as in :func:`sampled_prediction`.
+    h : float, optional
+        Base (communication) step (s); default ``t[1] - t[0]``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        y in the unit of ``amplitude``.
+    """
+    kp, kd, ki = check_gains(kp, kd, ki)
+    d = _delay(delay_steps)
+    t = np.asarray(t, dtype=float)
+    h = _positive("h", t[1] - t[0] if h is None else h, "s")
+    sample_time = h if sample_time is None else sample_time
+    continuous, plant, ts, _ = _discrete_plant(sample_time, damping)
+    ratio = round(ts / h)
+    if ratio < 1 or abs(ratio * h - ts) > 1e-9 * ts:
+        raise ValueError(f"sample_time must be an integer multiple of the base step {h:g} s, got {ts:g} s")
+    loop = _closed_loop(plant, kp, kd, ki, d)
+    cx, cu, du = np.asarray(loop.C[:2]), np.asarray(loop.C[2:]), np.asarray(loop.D[2:])
+    rows_c, rows_d = [], []
+    for j in range(ratio):
+        if j == 0:
+            phi, gamma = np.eye(2), np.zeros((2, 1))
+        else:
+            part = control.c2d(continuous, j * h, method="zoh")
+            phi, gamma = np.asarray(part.A), np.asarray(part.B)
+        rows_c.append((phi @ cx + gamma @ cu)[:1])
+        rows_d.append((gamma @ du)[:1])
+    lifted = control.ss(loop.A, loop.B, np.vstack(rows_c), np.vstack(rows_d), dt=ts)
+    samples = -(-len(t) // ratio)
+    y = control.step_response(lifted, T=ts * np.arange(samples), squeeze=False).outputs[:, 0, :]
+    return amplitude * np.asarray(y, dtype=float).T.reshape(-1)[:len(t)]
+
+
+def spectral_radius(kp: float, kd: float, ki: float, sample_time: float, delay_steps: int = 0,
+                    damping: float = 0.0) -> float:
+    """Largest |pole| of :func:`sampled_prediction` (``control.poles``): stable iff < 1.
+
+    Each sample multiplies the slowest error by about this radius, so -Ts / ln(radius) is the
+    slowest time constant (s) of a stable loop.
+    """
+    return float(np.max(np.abs(control.poles(sampled_prediction(kp, kd, ki, sample_time, delay_steps, damping)))))
+
+
+def largest_stable_kp(kd: float | None, sample_time: float, delay_steps: int = 0, ki: float = 0.0, *,
+                      zeta: float | None = None, damping: float = 0.0) -> float:
+    """The largest kp (1/s^2) at which every pole of :func:`sampled_prediction` is inside the unit circle.
+
+    Two forms, one of ``kd`` and ``zeta`` given:
+
+    - ``kd`` held (1/s), what a user tuning kp alone changes; PD, d = 0, beta = 0: 2 kd / Ts.
+    - ``zeta`` held, kd = 2 zeta sqrt(kp) (the continuous loop's damping ratio, as gains designed
+      from an overshoot keep it when made faster); PD, d = 0, beta = 0: min(16 zeta^2, 1 / zeta^2) / Ts^2.
+
+    The limit is the upper end of the interval of stable kp: kp is scanned upwards by factors
+    of 2 from 2^-40 / Ts^2 to the first unstable value after a stable one, then the crossing of
+    max |pole| - 1 is found by ``scipy.optimize.brentq`` to 1e-11 relative. (A PID has a lower
+    limit as well, about ki / kd; it is not returned.)
+
+    Parameters
+    ----------
+    kd : float or None
+        Derivative gain (1/s), None when ``zeta`` is given.
+    sample_time : float
+        Controller sample time Ts (s).
+    delay_steps : int
+        d, in controller samples.
+    ki : float
+        Integral gain (1/s^3), held; 0 for PD.
+    zeta : float, optional
+        Damping ratio held instead of ``kd``, > 0.
+    damping : float
+        beta (1/s), as in :func:`sampled_prediction`.
+
+    Returns
+    -------
+    float
+        kp (1/s^2). ValueError (naming the arguments) if no kp gives a stable loop.
+    """
+    if (kd is None) == (zeta is None):
+        raise ValueError("largest_stable_kp: give exactly one of kd and zeta")
+    if zeta is not None:
+        zeta = _positive("zeta", zeta, "")
+    _, kd_held, ki = check_gains(1.0, 1.0 if kd is None else kd, ki)
+    d = _delay(delay_steps)
+    _, plant, ts, _ = _discrete_plant(sample_time, damping)
+
+    def margin(kp: float) -> float:
+        kd_now = kd_held if zeta is None else 2.0 * zeta * math.sqrt(kp)
+        return float(np.max(np.abs(control.poles(_closed_loop(plant, kp, kd_now, ki, d))))) - 1.0
+
+    stable_at = None
+    for kp in 2.0 ** np.arange(-40, 11) / ts**2:
+        if margin(kp) < 0.0:
+            stable_at = kp
+        elif stable_at is not None:
+            return brentq(margin, stable_at, kp, xtol=1e-15 * kp, rtol=1e-11)
+    held = f"kd = {kd_held:g} 1/s" if zeta is None else f"zeta = {zeta:g}"
+    what = "is stable at no kp" if stable_at is None else f"is still stable at kp = {stable_at:g} 1/s^2"
+    raise ValueError(f"the loop with {held}, ki = {ki:g} 1/s^3, sample_time = {ts:g} s, delay_steps = {d}, "
+                     f"damping = {float(damping):g} 1/s {what}")
+
+
+def friction_steady_state_error(kp: float, coulomb: float, inertia: float, ki: float = 0.0) -> float:
+    """How far short of the reference Coulomb friction unknown to the controller stops a joint.
+
+    At rest the law's effort m kp e (+ m ki z) balances the friction; a PD can only do it with
+    e = tau_c / (m kp), a PID's integral takes over and e = 0. This is the edge of the stick band
+    |e| <= tau_c / (m kp) of ideal (sticking) Coulomb friction, where a joint ends that reaches
+    it without overshooting (the error keeps the sign of the step). The smooth model of the
+    plant creeps from there (:func:`friction_creep_time`).
+
+    Parameters
+    ----------
+    kp : float
+        Proportional gain (1/s^2), > 0.
+    coulomb : float
+        tau_c (N.m for a revolute joint, N for a prismatic one), >= 0.
+    inertia : float
+        m (kg.m^2 or kg), > 0: the joint's inertia at the operating point, 1 / (M^-1)_jj.
+    ki : float
+        Integral gain (1/s^3), >= 0.
+
+    Returns
+    -------
+    float
+        e = r - y at rest (rad or m), >= 0 for a step up.
+    """
+    kp, _, ki = check_gains(kp, 1.0, ki)
+    coulomb = _positive("coulomb", coulomb, "N.m (N)", zero=True)
+    inertia = _positive("inertia", inertia, "kg.m^2 (kg)")
+    return 0.0 if ki > 0.0 else coulomb / (inertia * kp)
+
+
+def friction_creep_time(kp: float, kd: float, ki: float, sample_time: float, coulomb: float, inertia: float,
+                        velocity_scale: float, delay_steps: int = 0, damping: float = 0.0) -> float:
+    """Time constant (s) with which the smooth Coulomb model lets the error creep out of the stick band.
+
+    tau_c tanh(qd / v_s) is, for |qd| << v_s, a viscous term of slope tau_c / v_s: near rest the
+    loop is :func:`sampled_prediction` with damping beta + tau_c / (m v_s), and the error decays
+    with its slowest pole, -Ts / ln(:func:`spectral_radius`). A run much shorter than this ends on
+    :func:`friction_steady_state_error`; a longer one ends closer to the reference.
+
+    Parameters
+    ----------
+    kp, kd, ki : float
+        Gains (1/s^2, 1/s, 1/s^3).
+    sample_time : float
+        Ts (s).
+    coulomb, inertia : float
+        tau_c (N.m or N) and m (kg.m^2 or kg), as in :func:`friction_steady_state_error`.
+    velocity_scale : float
+        v_s (rad/s or m/s), > 0.
+    delay_steps : int
+        d, in controller samples.
+    damping : float
+        beta = b / m (1/s) of the viscous friction.
+
+    Returns
+    -------
+    float
+        Seconds; inf if the linearized loop is not stable.
+    """
+    coulomb = _positive("coulomb", coulomb, "N.m (N)", zero=True)
+    inertia = _positive("inertia", inertia, "kg.m^2 (kg)")
+    velocity_scale = _positive("velocity_scale", velocity_scale, "rad/s (m/s)")
+    beta = _positive("damping", damping, "1/s", zero=True) + coulomb / (inertia * velocity_scale)
+    radius = spectral_radius(kp, kd, ki, sample_time, delay_steps, beta)
+    return -float(sample_time) / math.log(radius) if radius < 1.0 else math.inf

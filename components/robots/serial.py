@@ -455,7 +455,9 @@ class SerialRobot(RobotModel):
         out[:] = pin.rnea(self.model, self.data, q, qd, qdd)
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
-        if self._mimic:
+        # Pinocchio 4.1's computeKineticEnergy leaves out the armature of a RevoluteUnaligned
+        # joint (its CRBA, RNEA and ABA take it: tests/test_joint_losses.py): with armature, from M
+        if self._mimic or self.model.armature.any():
             return 0.5 * float(qd @ self.mass_matrix(q) @ qd)
         return float(pin.computeKineticEnergy(self.model, self.data, q, qd))
 

@@ -51,6 +51,10 @@ Sampled-data loop (:func:`discrete_prediction`), what the FMUs implement
     terms add errors quadratic in the amplitude. ``tests/test_stepresponse.py`` holds every
     described robot to 1 % of the amplitude at every sample for h = 1 ms.
 
+    A controller sampling at its own Ts = N h, its effort held over Ts and output d samples
+    late, and joint friction unknown to it, are :mod:`.sampled`'s (``sampled_prediction``,
+    ``predict_sampled``, ``largest_stable_kp``); with Ts = h and d = 0 it is this model.
+
 The gains follow the project's one rule (:func:`robofmu.components.control.check_gains`:
 kp > 0, kd > 0, ki >= 0); every model below refuses others with a ParameterError naming the gain.
 """

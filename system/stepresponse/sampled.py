@@ -9,7 +9,8 @@ Plant, integrated at h
     y'' = u - beta y', beta = ``damping`` (1/s): viscous friction b per unit inertia that the
     controller does not compensate (beta = 0: the perfect model). u is held over each
     controller period [t_k, t_k + Ts), t_k = k Ts, so the plant sees a zero-order hold at Ts
-    whatever its own step h < Ts:
+    whatever its own step h < Ts (up to M(q) and g(q) varying within the held period, as in
+    :mod:`.linear`, now over Ts instead of h):
 
         x_{k+1} = Phi x_k + Gamma u_k,  x = (y, y'),  (Phi, Gamma) = ``control.c2d(plant, Ts, 'zoh')``
 

@@ -287,7 +287,8 @@ def test_record_selection_exact_names_vector_bases_patterns(fmu_root):
     with pytest.raises(DiagramError) as info:
         Master(system, record=["plant.q", "plant.q[9]", "plnt.*"]).check()
     text = str(info.value)
-    assert "record: 'plant.q[9]' names no output (outputs of plant: plant.q[1..4], plant.qd[1..4], plant.within_limits)" in text
+    assert ("record: 'plant.q[9]' names no output (outputs of plant: plant.q[1..4], plant.qd[1..4], plant.within_limits, "
+            "plant.q_measured[1..4], plant.qd_measured[1..4])") in text
     assert "record: 'plnt.*' names no output (outputs: trajectory.x_ref[1..3]" in text
     assert "'plant.q'" not in text
 

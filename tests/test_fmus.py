@@ -151,7 +151,8 @@ def test_fmu_state_rollback_is_bit_for_bit(fmu_root):
     loop.set_states(states, t_saved)
     second = [loop.step(h) for _ in range(300)]
     assert first == second                   # every output, every step, exactly
-    assert len(first[0]) == 3 * 3 + 1 + 3 * 4 + 1 + 4 + 2 * 4 + 1  # trajectory, ik, controller, plant (q, qd, within_limits)
+    assert len(first[0]) == 3 * 3 + 1 + 3 * 4 + 1 + 4 + 2 * 4 + 1 + 2 * 4  # trajectory, ik, controller, plant (q, qd,
+    # within_limits, q_measured, qd_measured)
     # negative control: the controller's state saved at the same time by a loop whose arm started
     # elsewhere (same blocks, same controller parameters, another integral) changes the outputs,
     # so the controller's internal state is part of what is restored

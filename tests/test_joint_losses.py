@@ -435,3 +435,25 @@ def test_stiff_friction_shortens_the_substeps(tmp_path):
         stiff.step(np.zeros(1), 0.01, substeps=1)
         velocities[k] = stiff.qd[0]
     assert np.max(np.abs(velocities[-10:])) > 1e-4
+
+
+# -- through the master ----------------------------------------------------------------------------
+@pytest.mark.slow
+def test_zero_losses_run_chess_pd_bit_for_bit(fmu_root, tmp_path):
+    """chess-pd through the master for 0.5 s: the plant's and the controller's losses and armature
+    set to 0 explicitly give the CSV of the run that leaves them at the data's (chess: none) byte
+    for byte; the measured outputs are the state; damping unknown to the controller changes q."""
+    from robofmu.system import experiment
+    from robofmu.system.master import Master
+
+    system = experiment.load("chess-pd", fmu_dir=fmu_root)
+    zero = {f"{block}.{name}": [0.0] * 4 for block in ("plant", "controller") for name in ("damping", "friction",
+                                                                                       "armature")}
+    absent = Master(system).run(stop_time=0.5)
+    explicit = Master(experiment.with_parameters(system, zero)).run(stop_time=0.5)
+    assert absent.to_csv(tmp_path / "absent.csv").read_bytes() == explicit.to_csv(tmp_path / "zero.csv").read_bytes()
+    assert np.array_equal(absent.vector("plant.q_measured"), absent.vector("plant.q"))
+    assert np.array_equal(absent.vector("plant.qd_measured"), absent.vector("plant.qd"))
+    lossy = Master(experiment.with_parameters(system, {"plant.damping": [0.05] * 4,
+                                                       "controller.loss_compensation": 0.0})).run(stop_time=0.5)
+    assert np.max(np.abs(lossy.vector("plant.q") - absent.vector("plant.q"))) > 1e-6

@@ -125,9 +125,12 @@ def check_reference(description: RobotDescription, step_size: float = 1e-3,
         j = int(outside[0])
         unit = robot.joint_units(0)[j]
         side, limit = ("lower", lower[j]) if home[j] < lower[j] else ("upper", upper[j])
-        raise ReferenceRefused(f"{description.path}: configuration home puts joint {j + 1} ({robot.joint_names[j]}) "
-                               f"at {home[j]:.6g} {unit}, beyond its {side} limit {limit:.6g} {unit} "
-                               f"({_source(description, robot.joint_names[j], side)})")
+        state = description.srdf_configurations.get("home")
+        raise ReferenceRefused(f"{description.path}: configurations.home: "
+                               + (f"the SRDF state {state!r} " if state else "") + f"puts joint {j + 1} "
+                               f"({robot.joint_names[j]}) at {home[j]:.6g} {unit}, beyond its {side} limit "
+                               f"{limit:.6g} {unit} ({_source(description, robot.joint_names[j], side)}); "
+                               + _home_fix(home[j], lower[j], upper[j], unit, bool(state)))
     if "trajectory" not in description.blocks:
         return None
     sampled = _sample(description, step_size)
@@ -285,6 +288,16 @@ def _slower(description, table: str, duration: float, ratio: float, speed, step_
 def _toml(value) -> str:
     """A proposed value as the TOML takes it."""
     return f"[{', '.join(f'{v:g}' for v in value)}]" if isinstance(value, list) else f"{value:g}"
+
+
+def _home_fix(value: float, lower: float, upper: float, unit: str, state: bool) -> str:
+    """The fix for a home joint value beyond its limits: the same angle a turn away where that
+    lies inside, else a value inside; home as numbers when it was an SRDF state."""
+    turned = [value + turn for turn in (2.0 * np.pi, -2.0 * np.pi) if lower <= value + turn <= upper]
+    write = "write home as numbers with" if state else "give"
+    if unit == "rad" and turned:
+        return f"{write} {turned[0]:.6g} rad there, the same angle a turn away, inside [{lower:.6g}, {upper:.6g}]"
+    return f"{write} a value inside [{lower:.6g}, {upper:.6g}] {unit} there"
 
 
 def _source(description: RobotDescription, joint: str, key: str) -> str:

@@ -74,7 +74,7 @@ def test_home_beyond_a_limit_is_refused(copy_robot):
     joint = load_model("panda").joint_names[3]
     path = copy_robot("panda", lambda d: set_key(d, "joints.limits", {joint: {"upper": -2.5}}))
     with pytest.raises(ReferenceRefused, match=re.escape(
-            f"configuration home puts joint 4 ({joint}) at -2.35619 rad, beyond its upper limit -2.5 rad")):
+            f"configurations.home: puts joint 4 ({joint}) at -2.35619 rad, beyond its upper limit -2.5 rad")):
         check_reference(read(path))
 
 
@@ -146,7 +146,7 @@ def test_malformed_limits_are_refused_naming_the_key(tmp_path, limits, key, prob
 
 
 def test_limits_of_an_unknown_joint_are_refused(tmp_path):
-    with pytest.raises(ValueError, match=r"joints.limits.elbow: no joint 'elbow' in one.urdf \(its joints: shoulder\)"):
+    with pytest.raises(ValueError, match=r"joints.limits.elbow: no joint 'elbow' in one.urdf \(the model's joints: shoulder\)"):
         _one(tmp_path, '<limit lower="-1" upper="1" effort="1" velocity="1"/>', "[joints.limits.elbow]\nupper = 1.0\n")
 
 

@@ -178,7 +178,8 @@ def test_home_of_the_wrong_length_for_the_urdf_is_refused(copy_robot):
         load_model(description)
     text = str(info.value)
     assert text.startswith(f"{path}: configurations.home: ")
-    assert "needs 3 joint values (the URDF has 3 joints), got 2" in text
+    assert "needs 3 joint values, one per joint the model moves, in this order: " in text
+    assert text.endswith("; got 2: give one value per joint, or lock a joint (joints.locked, joints.chain)")
 
 
 def test_configurations_of_different_lengths_are_refused(copy_robot):
@@ -486,7 +487,7 @@ def test_locked_joints_leave_the_model_at_their_values():
 
 
 @pytest.mark.parametrize("locked, message", [
-    ({"panda_thumb": 0.02}, r"joints.locked.panda_thumb: no joint 'panda_thumb' in panda.urdf \(its joints: panda_joint1"),
+    ({"panda_thumb": 0.02}, r"joints.locked.panda_thumb: no joint 'panda_thumb' in panda.urdf \(its movable joints: panda_joint1"),
     ({"panda_finger_joint1": 0.05, "panda_finger_joint2": 0.02}, r"joints.locked.panda_finger_joint1: 0.05 lies outside the joint's limits \[0, 0.04\]"),
 ])
 def test_a_locked_joint_must_exist_and_lie_within_its_limits(copy_robot, locked, message):

@@ -538,8 +538,13 @@ def _resolve_states(description: RobotDescription) -> RobotDescription:
         values = description.states[state]
         unknown = [joint for joint in values if joint not in urdf.joints]
         if unknown:
+            prefix, _, bare = unknown[0].rpartition("/")
+            why = (f" (the URDF's is {bare!r}: the SRDF's names carry the prefix '{prefix}/')" if bare in urdf.joints
+                   else "")
             raise DescriptionError(description.path, key, f"the SRDF state {state!r} names joint {unknown[0]!r}, "
-                                                          f"which {urdf.path.name} lacks: use the robot's SRDF")
+                                                          f"which {urdf.path.name} lacks{why}: the SRDF is written for "
+                                                          f"another URDF; write {name} as numbers, one per joint: "
+                                                          f"{', '.join(model.names[j] for j in joints)}")
         configurations[name] = tuple(
             float(values[model.names[j]]) if model.names[j] in values else
             min(max(0.0, float(model.lowerPositionLimit[model.joints[j].idx_q])),

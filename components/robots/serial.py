@@ -76,17 +76,20 @@ def lock_values(description: RobotDescription, urdf: Urdf) -> dict[str, float | 
     at the value of the SRDF state ``home`` uses, else at 0 clipped into its limits; a mimic
     follower with its leader (q = multiplier q_leader + offset), else it stays a mimic joint."""
     locked: dict[str, float | None] = dict(description.locked)
+    movable = [name for name, joint in urdf.joints.items() if joint.type in MOVABLE]
     for joint in locked:
-        if joint not in urdf.joints:
-            raise ValueError(f"{description.path}: joints.locked.{joint}: no joint {joint!r} in {urdf.path.name} "
-                             f"(its joints: {', '.join(urdf.joints)})")
+        if joint not in urdf.joints or urdf.joints[joint].type == "fixed":
+            problem = (f"joint {joint!r} is fixed in {urdf.path.name} (nothing to lock): remove it" if joint in urdf.joints
+                       else f"no joint {joint!r} in {urdf.path.name}")
+            raise ValueError(f"{description.path}: joints.locked.{joint}: {problem} (its movable joints: "
+                             f"{', '.join(movable)})")
     if description.chain is None:
         return locked
     base, tip = description.chain
     try:
         on = {joint.name for joint in urdf.chain(base, tip)}
     except UrdfError as exc:
-        raise DescriptionError(description.path, "joints.chain", str(exc)) from None
+        raise DescriptionError(description.path, "joints.chain", str(exc).removeprefix(f"{exc.path}: ")) from None
     for name in on:
         joint = urdf.joints[name]
         if joint.type in ("floating", "planar"):
@@ -147,6 +150,19 @@ def _locked(model: pin.Model, description: RobotDescription, urdf: Urdf, locked:
     return pin.buildReducedModel(model, ids, reference)
 
 
+def _absent(joint: str, urdf: Urdf, description: RobotDescription) -> str:
+    """Why the model has no joint ``joint``, and the fix: not in the URDF, fixed, or removed by
+    ``[joints] locked`` or ``chain``."""
+    if joint not in urdf.joints:
+        return f"no joint {joint!r} in {urdf.path.name}"
+    if urdf.joints[joint].type == "fixed":
+        return f"joint {joint!r} is fixed in {urdf.path.name}: remove the table"
+    if joint in description.locked:
+        return f"joint {joint!r} is locked (joints.locked): remove the table or unlock it"
+    return (f"joint {joint!r} is off joints.chain {list(description.chain or ())}, so locked: remove the table "
+            "or give a chain through it")
+
+
 def _set_limits(model: pin.Model, description: RobotDescription, urdf: Urdf) -> None:
     """The joint limits as data: the checked URDF's (:class:`~.urdf.UrdfJoint`: none where it
     gives none), the description's ``[joints.limits.<joint>]`` over them."""
@@ -162,8 +178,8 @@ def _set_limits(model: pin.Model, description: RobotDescription, urdf: Urdf) -> 
                 arrays[key][index(j, key)] = getattr(urdf.joints[model.names[j]], key)
     for joint, limits in description.joint_limits.items():
         if not model.existJointName(joint):
-            raise ValueError(f"{description.path}: joints.limits.{joint}: no joint {joint!r} in "
-                             f"{urdf.path.name} (its joints: {', '.join(model.names[1:])})")
+            raise ValueError(f"{description.path}: joints.limits.{joint}: {_absent(joint, urdf, description)} "
+                             f"(the model's joints: {', '.join(model.names[1:])})")
         j = model.getJointId(joint)
         for key, value in limits.items():
             arrays[key][index(j, key)] = value
@@ -190,8 +206,9 @@ def _set_dynamics(model: pin.Model, description: RobotDescription, urdf: Urdf) -
     for joint, values in description.joint_dynamics.items():
         j = model.getJointId(joint) if model.existJointName(joint) else 0
         if j == 0 or model.joints[j].nv != 1:
-            raise ValueError(f"{description.path}: joints.dynamics.{joint}: no joint {joint!r} moves in the model of "
-                             f"{urdf.path.name} (its joints: {', '.join(n for n in model.names[1:])})")
+            absent = _absent(joint, urdf, description) if j == 0 else f"joint {joint!r} has no coordinate of its own"
+            raise ValueError(f"{description.path}: joints.dynamics.{joint}: {absent} "
+                             f"(the model's joints: {', '.join(n for n in model.names[1:])})")
         for key, value in values.items():
             arrays[key][model.joints[j].idx_v] = value
     for key, name in fields.items():
@@ -241,8 +258,7 @@ class SerialRobot(RobotModel):
         self._check_joints_and_links()
         self.n = self.model.nv
         if len(description.configuration("home")) != self.n:
-            raise ValueError(f"{description.path}: configurations.home: needs {self.n} joint values "
-                             f"(the URDF has {self.n} joints), got {len(description.configuration('home'))}")
+            raise ValueError(f"{description.path}: configurations.home: {self._home_length()}")
         self.task_id = self._frame(description.task.frame, "task.frame")
         self._axes = np.array(description.task.axes)
         self._task_axes = list(description.task.axes)
@@ -267,6 +283,22 @@ class SerialRobot(RobotModel):
         self.joint_names = [self.model.names[j] for j in joints]
         self.prismatic = [self.model.joints[j].shortname().startswith("JointModelP") for j in joints]
         self._mimic = len(joints) < self.model.njoints - 1   # Pinocchio's ABA and energies take none
+
+    def _home_length(self) -> str:
+        """What a home of the wrong length lacks: the model's joints in home's order, the joints
+        the description removes, and the fix."""
+        names = [self.model.names[j] for j in range(1, self.model.njoints) if self.model.joints[j].nv]
+        removed = lock_values(self.description, self.urdf)
+        got = len(self.description.configuration("home"))
+        off = ""
+        if removed:
+            shown = ", ".join(list(removed)[:4]) + (f" and {len(removed) - 4} more" if len(removed) > 4 else "")
+            keys = [k for k, v in (("joints.locked", self.description.locked), ("joints.chain", self.description.chain))
+                    if v]
+            off = f"; {shown} locked ({' and '.join(keys)})"
+        fix = "give one value per joint" + (", or lock a joint (joints.locked, joints.chain)" if got < self.n else "")
+        return (f"needs {self.n} joint values, one per joint the model moves, in this order: {', '.join(names)}"
+                f"{off}; got {got}: {fix}")
 
     def _check_joints_and_links(self) -> None:
         """Refuse, naming the joint or link, what the run would otherwise discover at t = 0: a joint

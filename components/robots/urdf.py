@@ -152,11 +152,22 @@ class Urdf:
         while link != base:
             joint = self.parent_joint(link)
             if joint is None:
-                raise UrdfError(self.path, f"link {tip!r}", f"is not below link {base!r}",
-                                f"give a base link above it (its root: {self.root!r})")
+                path = self._above(tip)[::-1]
+                shown = ", ".join(path[:8]) + (", ..." if len(path) > 8 else "")
+                fix = (f"swap them: the base link first, [{tip!r}, {base!r}]" if tip in self._above(base) else
+                       f"give a base link above it (the links above it, from the root: {shown})")
+                raise UrdfError(self.path, f"link {tip!r}", f"is not below link {base!r}", fix)
             joints.append(joint)
             link = joint.parent
         return joints[::-1]
+
+    def _above(self, link: str) -> list[str]:
+        """The links above ``link``, its parent first, up to the root."""
+        found = []
+        while (joint := self.parent_joint(link)) is not None:
+            link = joint.parent
+            found.append(link)
+        return found
 
     def xml(self, drop_mimic=()) -> str:
         """:attr:`text` without the ``<mimic>`` of the joints ``drop_mimic`` (locked followers:

@@ -186,9 +186,10 @@ def _wrapped(label: str, names: list[str], width: int = 100) -> list[str]:
 def render(found: Inspection) -> str:
     """The tables, one screen for an arm (a robot with many leaves lists them on wrapped lines)."""
     urdf = found.urdf
-    movable = [j for j in urdf.joints.values() if j.type != "fixed"]
     home = found.home
     index = {name: k for k, name in enumerate(home.joints)} if home else {}
+    # home's joints first, in home's order (the model's, not the file's), then the others as in the file
+    movable = sorted((j for j in urdf.joints.values() if j.type != "fixed"), key=lambda j: index.get(j.name, len(index)))
     out = [f"{urdf.name} ({found.source}): {len(urdf.links)} links, {len(urdf.joints)} joints "
            f"({sum(j.movable for j in movable)} movable), total mass {urdf.total_mass:.4g} kg", ""]
     rows = []
@@ -199,7 +200,8 @@ def render(found: Inspection) -> str:
         rows.append([j.name, j.type + (" (unbounded)" if j.type == "continuous" else ""), _number(lower),
                      _number(upper), _number(velocity), _number(effort), j.mimic or "",
                      found.roles.get(j.name, ""), "" if k is None else f"{home.q[k]:.4g}", gap])
-    out += ["joints (rad or m; rad/s or m/s; N.m or N; '-': none)"]
+    out += ["joints (" + ("those home gives first, in its order; " if home else "") +
+            "rad or m; rad/s or m/s; N.m or N; '-': none)"]
     out += _table(["joint", "type", "lower", "upper", "velocity", "effort", "mimic", "role", "home", "to limit"], rows)
     out += ["", "leaf links that joints move (the possible tools), most joints first"]
     ranked = sorted(found.leaves.items(), key=lambda item: -len(item[1]))

@@ -38,6 +38,7 @@ SWEEP_OPTIONS = {
                        [f"--samples {10 ** 12}", "memory", "available"]),
     "range-memory": (["--vary", f"controller.kp=1:2:{10 ** 12}"],
                      [f"--vary controller.kp=1:2:{10 ** 12}", "memory", "available"]),
+    "workers-memory": (["--vary", "controller.kp=100,200", "--workers", "100000"], ["--workers 100000", "memory"]),
     "grid-memory": (["--vary", "controller.kp=1:2:100000", "--vary", "controller.kd=1:2:100000"],
                     ["--vary controller.kp (100000 values) x --vary controller.kd (100000 values)", "10000000000 runs",
                      "memory"]),

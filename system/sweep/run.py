@@ -29,12 +29,13 @@ from robofmu.system.master import DiagramError, Master
 from robofmu.system.roles import check_roles
 from robofmu.system.sweep.design import STEP_SIZE_AXIS, Design
 from robofmu.system.options import finite
-from robofmu.system.sweep.engine import SweepProgress, cluster_client, default_workers, execute, probe_scheduler
+from robofmu.system.sweep.engine import BYTES_PER_WORKER, SweepProgress, cluster_client, default_workers, execute, \
+    probe_scheduler
 from robofmu.system.sweep.journal import Journal, key_of
 from robofmu.system.sweep.metrics import METRIC_UNITS, metric_names
 from robofmu.system.sweep.report import write_report
 from robofmu.system.sweep.result import SweepRun
-from robofmu.system.usage import UsageError, check_fmu_folder, check_times, check_writable, owned_by, timing
+from robofmu.system.usage import UsageError, check_fmu_folder, check_memory, check_times, check_writable, owned_by, timing
 
 __all__ = ["SweepInterrupted", "SweepRun", "check", "run_sweep"]
 
@@ -159,6 +160,8 @@ def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = defaults.FM
     """
     if workers is not None and workers < 1:
         raise UsageError(f"--workers {workers}: must be at least 1")
+    if workers is not None:
+        check_memory(workers * BYTES_PER_WORKER, f"--workers {workers}", "give fewer workers (each is a process)")
     finite("--threshold", threshold)
     if scheduler:
         probe_scheduler(scheduler)           # a refused connection at once, not after Dask's timeout

@@ -36,7 +36,7 @@ def spec(experiment: str = "chess-pd", fmu_dir: str | Path = "fmus") -> dict:
     that joint's frame).
     """
     from robofmu.components.trajectory import SNAP_TOLERANCE, WaypointTrajectory
-    from robofmu.system.check import step_count
+    from robofmu.system.plan import step_count
     from robofmu.system.experiment import load
     from robofmu.system.studies.replica import InProcessDiagram
 

@@ -38,7 +38,7 @@ import numpy as np
 
 import robofmu.components  # noqa: F401  (the installed copy first, before any FMU's bundle)
 from robofmu.system import options
-from robofmu.system.check import step_count
+from robofmu.system.plan import step_count
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
 

@@ -176,11 +176,15 @@ class BlockSpec:
         The FMU file. A relative path is resolved against the diagram's ``fmu_dir``.
     parameters : dict
         Start values to set before initialization, by variable name or vector base.
+    sample_time : float or None
+        (s) The block is stepped every ``sample_time``, a whole multiple of the run's base step,
+        its outputs held in between; None: every base step.
     """
 
     name: str
     fmu: str | Path
     parameters: dict = field(default_factory=dict)
+    sample_time: float | None = None
 
 
 @dataclass(frozen=True)
@@ -263,7 +267,9 @@ class System:
             missing = [key for key in ("name", "fmu") if not isinstance(b, dict) or key not in b]
             if missing:
                 raise ValueError(f"blocks[{k}]: missing key {missing[0]!r}")
-            blocks.append(BlockSpec(b["name"], b["fmu"], dict(b.get("parameters", {}))))
+            sample = b.get("sample_time")
+            blocks.append(BlockSpec(b["name"], b["fmu"], dict(b.get("parameters", {})),
+                                    None if sample is None else float(sample)))
         return cls(blocks=blocks, wires=list(data.get("connections", [])),
                    fmu_dir=Path(fmu_dir if fmu_dir is not None else data.get("fmu_dir", defaults.FMU_FOLDER)),
                    name=data.get("name", "system"), description=data.get("description", ""),

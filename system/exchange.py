@@ -27,7 +27,7 @@ import fmpy
 import numpy as np
 from fmpy.fmi2 import fmi2Boolean, fmi2Component, fmi2Real, fmi2Status, fmi2True, fmi2ValueReference
 
-from robofmu.system.check import Link
+from robofmu.system.plan import Link
 from robofmu.system.fmu import status_name
 
 __all__ = ["Failure", "Fmi2Functions", "Inputs", "Port", "Ports", "getters", "output_port", "setters", "stepper"]

@@ -29,7 +29,9 @@ robot with a payload, ``payload_mass = "robot:payload.mass"``. Each role is the 
 name (``q``, ``qd``, ``q_ref``, ``tau``, ``x_ref``, ``quat_ref``, ``grip``); ``x`` is the plant's
 pose output where it has one. The ports are read from the blocks' declared variables, so nothing
 here knows a robot. What the file also gives overrides: a ``[[blocks]]`` table replaces the
-derived block of its name as written (or adds a block); ``connections`` are added, each replacing
+derived block of its name as written (or adds a block), and one without ``fmu`` amends the derived
+block of its name: its ``sample_time`` and ``parameters`` set over the derived ones (``[[blocks]]
+name = "controller"  sample_time = 0.004``); ``connections`` are added, each replacing
 the derived wiring of the input it drives (the whole vector); a ``[roles]`` entry replaces that
 role; ``[parameters.<block>]`` sets parameters of the derived blocks. A file with a ``loop`` may
 be a ``base``; a ``loop`` and a ``base`` in one file are refused.
@@ -89,7 +91,8 @@ KEYS = {"name": "a string (the experiment's name)",
 #: Keys of one ``[[blocks]]`` table.
 BLOCK_KEYS = {"name": "the instance name, a string",
               "fmu": "the FMU file relative to the FMU folder, a string",
-              "parameters": "a table of parameter = value"}
+              "parameters": "a table of parameter = value",
+              "sample_time": "the block's sample time in s > 0, a whole multiple of the step (default: the step)"}
 
 
 class ExperimentError(ValueError):
@@ -226,6 +229,8 @@ def _check_file(path: Path, data: dict) -> None:
                 if key not in BLOCK_KEYS:
                     raise _unknown(path, key, BLOCK_KEYS, where=f"{where}.")
             for key in ("name", "fmu"):
+                if key == "fmu" and "fmu" not in block and "loop" in data:
+                    continue                     # sets sample_time / parameters of a derived block
                 if key not in block:
                     label = f" ({block['name']!r})" if isinstance(block.get("name"), str) else ""
                     raise ExperimentError(path, f"{where}.{key}", f"missing key in block {k}{label}: "
@@ -237,6 +242,11 @@ def _check_file(path: Path, data: dict) -> None:
             names.add(block["name"])
             if "parameters" in block and not isinstance(block["parameters"], dict):
                 raise _wrong(path, f"{where}.parameters", BLOCK_KEYS["parameters"], block["parameters"])
+            if "sample_time" in block:
+                value = block["sample_time"]
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                        or value <= 0:
+                    raise _wrong(path, f"{where}.sample_time", "a time in s > 0", value)
     if "connections" in data:
         wires = data["connections"]
         if not isinstance(wires, list):
@@ -427,9 +437,18 @@ def _with_loop(path: Path, data: dict) -> dict:
         for dst, base in driven:
             if dst == block["name"]:
                 block["parameters"].pop(base, None)
-    for block in data.get("blocks", []):                 # a block of the file replaces the derived one
+    for k, block in enumerate(data.get("blocks", []), 1):  # a block of the file replaces the derived one
         names = [b["name"] for b in blocks]
-        if block["name"] in names:
+        if "fmu" not in block:                            # ... or, without `fmu`, amends it
+            if block["name"] not in names:
+                raise ExperimentError(path, f"blocks[{k}].fmu", f"missing key: {block['name']!r} is no derived "
+                                                               f"block (derived: {', '.join(names)}), so it needs "
+                                                               "its fmu")
+            derived = blocks[names.index(block["name"])]
+            derived["parameters"] = {**derived["parameters"], **block.get("parameters", {})}
+            if "sample_time" in block:
+                derived["sample_time"] = block["sample_time"]
+        elif block["name"] in names:
             blocks[names.index(block["name"])] = block
         else:
             blocks.append(block)

@@ -1,8 +1,9 @@
 """The co-simulation master: runs a planned diagram, initializing its FMUs and stepping them.
 
-:meth:`Master.check` plans the diagram (:func:`robofmu.system.check.plan`: every problem at
-once, the evaluation order); :meth:`Master.run` instantiates the blocks in that order and steps
-them, returning a :class:`~robofmu.system.result.Result`.
+:meth:`Master.check` plans the run (:func:`robofmu.system.plan.plan`, one pass: every problem
+at once, the evaluation order, the times, each block's sample rate, the memory check);
+:meth:`Master.run` instantiates the blocks in that order and steps them, returning a
+:class:`~robofmu.system.result.Result`.
 
 At every communication point t the master evaluates the diagram in dependency order
 (Gauss-Seidel: a direct-feedthrough block reads inputs its upstream blocks produced at t, so
@@ -12,6 +13,15 @@ controller) are set once the pass is over. It records every output, then calls d
 each block, so the plant integrates [t, t + h] with the torque computed at t. The Jacobi option
 reads all outputs first and then sets all inputs, so each feedthrough block lags one step (for
 comparison).
+
+**Sample rates.** A block whose ``sample_time`` is r base steps h is *due* at the base steps
+k = 0, r, 2r, ...: there its inputs are set and its outputs read (in the same evaluation order),
+and it steps doStep(t_k, r h). At the other base steps it is left alone: its outputs stay in
+the signal vector as last read (zero-order hold), and nothing is set on it. So a controller at
+4 ms beside a plant at 1 ms reads the plant's outputs at t_k (k = 0, 4, 8, ...) and its effort
+is held over the plant's next four steps. A due block whose step would end after the stop time
+is not stepped (nothing would read its result). With every block at the base step this is the
+loop above, call for call.
 
 Values move between FMUs through preallocated signal vectors: one batched fmi2GetReal per block
 into them, one batched fmi2SetReal per block from them, nothing allocated per step. Those calls
@@ -27,27 +37,27 @@ callback, or where no handler could be installed) is an interruption too, and so
 KeyboardInterrupt raised in a block's own Python code during an FMI call: the block abandons
 the call with fmi2Error and a message holding :data:`INTERRUPTION`, which the master recognizes.
 
-``Result``, ``DiagramError`` and ``step_count`` are re-exported from
-:mod:`robofmu.system.result` and :mod:`robofmu.system.check`.
+``Result``, ``DiagramError``, ``step_count`` and ``available_memory`` are re-exported from
+:mod:`robofmu.system.result` and :mod:`robofmu.system.plan`.
 """
 from __future__ import annotations
 
 import math
-import os
 import time as _time
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from robofmu.system.check import DiagramError, Link, Node, Plan, plan, step_count, variable_unit
 from robofmu.components.fmi.reporting import INTERRUPTION
 from robofmu.system.defaults import ALGORITHMS
-from robofmu.system.diagram import System, select, unmatched
+from robofmu.system.diagram import System
 from robofmu.system.exchange import (Failure, Fmi2Functions, Inputs, Ports, getters, output_port, setters,
                                      stepper)
 from robofmu.system.fmu import FMUInstance, FMUError, LogMessage
 from robofmu.system.interrupt import sigint_flag
+from robofmu.system.plan import (DiagramError, Link, Node, Plan, Times, available_memory, plan, step_count, times,
+                                 variable_unit)
 from robofmu.system.result import HEALTH, Message, Result, group_messages, status_meanings
 
 __all__ = ["DiagramError", "Interrupted", "Master", "Result", "SimulationError", "available_memory", "step_count"]
@@ -89,41 +99,6 @@ class Interrupted(SimulationError):
     interrupted before the first one), ``result`` every point up to it (None: none), ``block``
     the block whose code was interrupted, else None.
     """
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (``MemAvailable``), or None if unknown."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def _compact(names: list[str]) -> list[str]:
-    """Signal names with each vector written once: ``plant.q[1..4]``, ``trajectory.grip``."""
-    bases: dict[str, list[int]] = {}
-    for name in names:
-        head, bracket, rest = name.partition("[")
-        if bracket and rest[:-1].isdigit():
-            bases.setdefault(head, []).append(int(rest[:-1]))
-        else:
-            bases.setdefault(name, [])
-    return [f"{base}[{min(i)}..{max(i)}]" if len(i) > 1 else f"{base}[{i[0]}]" if i else base
-            for base, i in bases.items()]
-
-
-def _gigabytes(n: int) -> str:
-    """A byte count for messages: 38.5 GB, 288 TB."""
-    for size, unit in ((1e12, "TB"), (1e9, "GB"), (1e6, "MB")):
-        if n >= size or unit == "MB":
-            return f"{n / size:.3g} {unit}"
 
 
 class Master:
@@ -173,48 +148,19 @@ class Master:
         self._clock = [0.0]            # the communication point the messages arrive at (s)
 
     # -- the plan ----------------------------------------------------------------------------------
-    def check(self) -> list[str]:
-        """Refuse a diagram that cannot run (DiagramError); return the warnings.
+    def check(self, run_times: Times | None = None) -> list[str]:
+        """Plan the run (:func:`~robofmu.system.plan.plan`: DiagramError listing every problem,
+        a ``record`` entry naming no output among them); return the warnings.
 
-        Besides :func:`~robofmu.system.check.plan`'s checks, every ``record`` entry must name
-        at least one output (the refusal names the entry and some of the outputs).
+        Parameters
+        ----------
+        run_times : Times, optional
+            The run's (:func:`~robofmu.system.plan.times`): the plan then holds them, the
+            blocks' ratios against its base step and the memory check, and :meth:`run` without
+            times runs them. None: times are planned by :meth:`run`.
         """
-        planned = plan(self.system)
-        outputs = [f"{name}.{v.name}" for name in planned.order
-                   for v in planned.nodes[name].model_description.modelVariables
-                   if v.causality == "output" and v.type in ("Real", "Boolean")]
-        missing = unmatched(outputs, self.record)
-        if missing:
-            problems = []
-            for entry in missing:
-                block = entry.split(".", 1)[0]
-                near = [o for o in outputs if o.split(".", 1)[0] == block]
-                shown = _compact(near or outputs)
-                problems.append(f"record: {entry!r} names no output ({'outputs of ' + block if near else 'outputs'}: "
-                                f"{', '.join(shown[:12])}{', ...' if len(shown) > 12 else ''})")
-            raise DiagramError(self.system.name, problems)
-        self.plan = planned
+        self.plan = plan(self.system, self.record, run_times)
         return self.plan.warnings
-
-    def recorded_columns(self) -> int:
-        """How many signals a run records (plans the diagram first if :meth:`check` has not run)."""
-        if self.plan is None:
-            self.check()
-        self._layout()
-        return len(self.keep)
-
-    def memory_problem(self, n_steps: int) -> str | None:
-        """Why a run of ``n_steps`` steps would not fit in memory, or None if it fits.
-
-        The recording takes (n + 1) rows x (recorded signals + time) x 8 bytes; it must fit in
-        half the memory available (:func:`available_memory`; the analysis of a run makes copies).
-        """
-        columns = self.recorded_columns()
-        need, free = (n_steps + 1) * (columns + 1) * 8, available_memory()
-        if free is None or need <= free / 2:
-            return None
-        return (f"{n_steps} steps x {columns} recorded signals need {_gigabytes(need)} of memory, more "
-                f"than half of the {_gigabytes(free)} available")
 
     @property
     def nodes(self) -> dict[str, Node]:
@@ -238,18 +184,19 @@ class Master:
 
     # -- run ----------------------------------------------------------------------------------------
     def run(self, stop_time: float | None = None, step: float | None = None,
-            algorithm: str | None = None, start_time: float = 0.0,
+            algorithm: str | None = None, start_time: float | None = None,
             csv_path: str | Path | None = None) -> Result:
         """Initialize every block and step the diagram from ``start_time`` to ``stop_time``.
 
         Parameters
         ----------
         stop_time, step : float, optional
-            Run end and communication step (s); default the system's.
+            Run end and base communication step (s); default the times :meth:`check` planned
+            (when none of the three is given), else the system's.
         algorithm : str, optional
             One of :data:`robofmu.system.defaults.ALGORITHMS`; default the system's.
-        start_time : float
-            (s).
+        start_time : float, optional
+            (s); default 0 (or the planned one).
         csv_path : str or Path, optional
             Where to write the result (also on a failure, with the points recorded so far).
 
@@ -265,7 +212,8 @@ class Master:
             A bad start time, stop time or step (not finite, a step not > 0, a stop time not
             after the start or not a whole number of steps; each named as the argument, or as
             the system's value it defaults to), an unknown algorithm, or a recording that would
-            not fit in memory (:meth:`memory_problem`); nothing is instantiated.
+            not fit in memory (:attr:`Plan.memory <robofmu.system.plan.Plan.memory>`); nothing is
+            instantiated.
         DiagramError
             The diagram or the ``record`` selection cannot run (:meth:`check`).
         SimulationError
@@ -280,19 +228,24 @@ class Master:
             the run at once, with every point recorded before it, written to ``csv_path`` too.
         """
         system = self.system
-        given = {"start_time": start_time, "stop_time": stop_time, "step": step}
-        start_time = float(start_time)
-        stop_time = float(system.stop_time if stop_time is None else stop_time)
-        h = float(system.step if step is None else step)
         algorithm = system.algorithm if algorithm is None else algorithm
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(ALGORITHMS)}")
-        n_steps = _checked_steps(start_time, stop_time, h, given, system.name)
-        if self.plan is None:
-            self.check()
-        problem = self.memory_problem(n_steps)
-        if problem:
-            raise ValueError(problem)
+        planned = self.plan
+        if planned is None or planned.times is None or (start_time, stop_time, step) != (None, None, None):
+            try:
+                run_times = times(system, 0.0 if start_time is None else start_time, stop_time, step)
+            except ValueError as exc:
+                raise ValueError(f"Master.run: {exc}") from None
+            if planned is None:
+                self.check(run_times)
+            elif planned.times != run_times:
+                self.plan = planned.timed(run_times)
+        run_times = self.plan.times
+        if self.plan.memory:
+            raise ValueError(self.plan.memory)
+        start_time, stop_time, h, n_steps = run_times.start, run_times.stop, run_times.step, run_times.n_steps
+        self._layout()
         with sigint_flag() as interrupted:     # the loop stops at the next point (no exception in a FMU)
             try:
                 try:
@@ -356,9 +309,9 @@ class Master:
         outputs = [(name, variable) for name in self.order
                    for variable in self.nodes[name].model_description.modelVariables
                    if variable.causality == "output" and variable.type in ("Real", "Boolean")]
-        recorded = set(select([f"{name}.{v.name}" for name, v in outputs], self.record))
+        recorded = set(self.plan.recorded)
         wired = {(link.source, link.output) for link in self.links}
-        read = [(name, v) for k, (name, v) in enumerate(outputs) if k in recorded or (name, v.name) in wired]
+        read = [(name, v) for name, v in outputs if f"{name}.{v.name}" in recorded or (name, v.name) in wired]
         real_outputs = [(name, v) for name, v in read if v.type == "Real"]           # evaluation order
         boolean_outputs = [(name, v) for name, v in read if v.type == "Boolean"]
         self.real_signals = np.zeros(len(real_outputs))
@@ -389,41 +342,49 @@ class Master:
         self.boolean_names = [f"{block}.{v.name}" for block, v in boolean_outputs]
         units = {f"{block}.{v.name}": variable_unit(v) for block, v in real_outputs + boolean_outputs}
         columns = self.real_names + self.boolean_names
-        keep = select(columns, self.record)
+        keep = [k for k, column in enumerate(columns) if column in recorded]
         self.columns = [columns[k] for k in keep]
         self.units = {column: units[column] for column in self.columns if units[column]}
         self.keep = np.array(keep, dtype=np.intp)
 
-    def _operations(self, algorithm: str):
-        """One exchange and one step as flat lists of closures over preallocated buffers.
+    def _operations(self, algorithm: str, h: float):
+        """The exchanges and steps as flat lists of closures over preallocated buffers.
 
-        Gauss-Seidel: for each block in evaluation order, set its inputs from blocks evaluated
-        before it, then read its outputs; after the pass, set the inputs that come from blocks
-        evaluated later. Jacobi: read every output, then set every input.
+        Gauss-Seidel: for each due block in evaluation order, set its inputs from blocks
+        evaluated before it, then read its outputs; after the pass, set the due blocks' inputs
+        that come from blocks evaluated later. Jacobi: read every due output, then set every due
+        input. A block not due is left alone (its outputs held in the signal vectors).
 
         Returns
         -------
-        first, exchange : list of callable
-            The exchange at the first point (always Gauss-Seidel: a consistent start) and at
-            every later point; each op takes no argument.
-        steps : list of callable
-            ``op(t, h)``: one doStep per block, in evaluation order.
+        first : list of callable
+            The exchange at the first point (Gauss-Seidel, every block due: a consistent start).
+        schedule : callable
+            ``schedule(due)`` -> (exchange, steps) for the tuple of blocks due (in evaluation
+            order): ``op()`` each, and ``(op, size)`` pairs, ``op(t, size)`` one doStep of
+            ``size`` = the block's sample time (s).
         """
         real_signals, boolean_signals = self.real_signals, self.boolean_signals
-        early, reads, late, steps = [], [], [], []
+        early, reads, late, steps = {}, {}, {}, {}
         for name in self.order:
             functions, ports = Fmi2Functions(self.blocks[name].slave), self.ports[name]
-            reads.append(getters(functions, ports, name))
-            early.append(setters(functions, ports.early, real_signals, boolean_signals, name))
-            late.append(setters(functions, ports.late, real_signals, boolean_signals, name))
-            steps.append(stepper(functions, name))
-        gauss_seidel = ([op for sets, gets in zip(early, reads) for op in sets + gets]
-                        + [op for sets in late for op in sets])
-        if algorithm == "gauss-seidel":
-            return gauss_seidel, gauss_seidel, steps
-        jacobi = ([op for gets in reads for op in gets]
-                  + [op for sets_early, sets_late in zip(early, late) for op in sets_early + sets_late])
-        return gauss_seidel, jacobi, steps     # Jacobi, too, starts from a consistent first exchange
+            reads[name] = getters(functions, ports, name)
+            early[name] = setters(functions, ports.early, real_signals, boolean_signals, name)
+            late[name] = setters(functions, ports.late, real_signals, boolean_signals, name)
+            steps[name] = stepper(functions, name)
+        ratios = self.plan.ratios
+
+        def exchange(due, method):
+            if method == "gauss-seidel":
+                return ([op for name in due for op in early[name] + reads[name]]
+                        + [op for name in due for op in late[name]])
+            return ([op for name in due for op in reads[name]]
+                    + [op for name in due for op in early[name] + late[name]])
+
+        def schedule(due):
+            return exchange(due, algorithm), [(steps[name], ratios[name] * h) for name in due]
+
+        return exchange(tuple(self.order), "gauss-seidel"), schedule
 
     def _loop(self, t0: float, h: float, n_steps: int, algorithm: str, csv_path,
               interrupted: list | None = None) -> Result:
@@ -434,15 +395,27 @@ class Master:
         row = np.zeros(n_real + len(boolean_signals))
         record_all = np.array_equal(self.keep, np.arange(len(row)))
         recorded = np.empty((n_steps + 1, len(self.keep)))
-        times = t0 + h * np.arange(n_steps + 1)
-        first, exchange, steps = self._operations(algorithm)
+        times_ = t0 + h * np.arange(n_steps + 1)
+        first, schedule = self._operations(algorithm, h)
+        everyone = tuple(self.order)
+        exchange, steps = schedule(everyone)
+        # The blocks due at base step k (and stepped there: their step ends by the stop time).
+        ratios = [(name, self.plan.ratios[name]) for name in self.order]
+        multirate = self.plan.multirate
+        plans: dict = {}
         clock = self._clock
         every = max(1, n_steps // 20)
         t, n_recorded = t0, 0
         wall = _time.perf_counter()
         try:
             for k in range(n_steps + 1):
-                t = clock[0] = times[k]
+                t = clock[0] = times_[k]
+                if multirate:
+                    due = tuple(name for name, r in ratios if k % r == 0)
+                    stepped = tuple(name for name, r in ratios if k % r == 0 and k + r <= n_steps)
+                    if (due, stepped) not in plans:
+                        plans[due, stepped] = schedule(due)[0], schedule(stepped)[1]
+                    exchange, steps = plans[due, stepped]
                 for op in (first if k == 0 else exchange):    # Jacobi, too, starts consistent
                     op()
                 if not math.isfinite(real_signals.dot(ones)) and not np.isfinite(real_signals).all():
@@ -462,15 +435,15 @@ class Master:
                     raise Failure("", "interrupted", "SIGINT")
                 if k == n_steps:
                     break
-                for op in steps:
-                    op(t, h)
+                for op, size in steps:
+                    op(t, size)
                 if self.progress is not None and (k + 1) % every == 0:
                     self.progress((k + 1) / n_steps, t + h)
         except KeyboardInterrupt:       # a callback's, or a signal no handler could note
-            kept = (times, recorded, n_recorded, algorithm, h, csv_path)
+            kept = (times_, recorded, n_recorded, algorithm, h, csv_path)
             raise self._interruption(" (KeyboardInterrupt)", None, *kept) from None
         except Failure as exc:
-            kept = (times, recorded, n_recorded, algorithm, h, csv_path)
+            kept = (times_, recorded, n_recorded, algorithm, h, csv_path)
             if exc.call == "SIGINT":
                 raise self._interruption("", None, *kept) from None
             if exc.call:
@@ -482,15 +455,17 @@ class Master:
                            + (": " + logged[-1] if logged else f" (status {exc.message})"))
             else:
                 message = f"{exc.block}: {exc.message}"
-            result = self._result(times[:n_recorded].copy(), recorded[:n_recorded].copy(),
+            result = self._result(times_[:n_recorded].copy(), recorded[:n_recorded].copy(),
                                   {"failed": message, "algorithm": algorithm, "step": h})
             if csv_path is not None:
                 result.to_csv(csv_path)
-            raise SimulationError(message + (f"\nresults up to t = {times[n_recorded - 1]:.9g} s kept"
+            raise SimulationError(message + (f"\nresults up to t = {times_[n_recorded - 1]:.9g} s kept"
                                              + (f" in {csv_path}" if csv_path else "") if n_recorded else ""),
                                   exc.block, float(t), result, message) from None
-        result = self._result(times, recorded, {"algorithm": algorithm, "step": h,
-                                                "wall_time": _time.perf_counter() - wall, "order": list(self.order)})
+        info = {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall, "order": list(self.order)}
+        if multirate:
+            info["sample_times"] = {name: r * h for name, r in ratios}
+        result = self._result(times_, recorded, info)
         if csv_path is not None:
             result.to_csv(csv_path)
         return result
@@ -516,30 +491,3 @@ class Master:
         for block in self.blocks.values():
             block.close()
         self.blocks = {}
-
-
-def _checked_steps(start_time: float, stop_time: float, h: float, given: dict, name: str) -> int:
-    """:func:`step_count` of a run, each bad argument refused first (ValueError naming it: the
-    argument of :meth:`Master.run`, or the system's value it defaults to)."""
-    values = {"start_time": start_time, "stop_time": stop_time, "step": h}
-
-    def named(key: str) -> str:
-        return f"{key} = {values[key]!r} s" if given[key] is not None or key == "start_time" else \
-            f"{key} = {values[key]!r} s (system {name!r})"
-
-    for key, value in values.items():
-        if not math.isfinite(value):
-            raise ValueError(f"Master.run: {named(key)} is invalid: must be a finite time")
-    if not h > 0.0:
-        raise ValueError(f"Master.run: {named('step')} is invalid: must be > 0")
-    if not stop_time > start_time:
-        raise ValueError(f"Master.run: {named('stop_time')} is invalid: must be after {named('start_time')}")
-    ratio = (stop_time - start_time) / h
-    if not ratio <= 1e15:
-        raise ValueError(f"Master.run: {named('stop_time')}, {named('start_time')} and {named('step')} make "
-                         f"{ratio:.3g} steps, far more than memory can record")
-    try:
-        return step_count(start_time, stop_time, h)
-    except ValueError as exc:
-        raise ValueError(f"Master.run: {exc}") from None
-

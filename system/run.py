@@ -6,9 +6,12 @@ mistake with a :class:`UsageError` (a ValueError) in one line naming the option,
 - the experiment (:func:`robofmu.system.experiment.load`: the file and the key);
 - the FMU folder (``--fmus``): missing, an FMU missing, or built from other robofmu sources
   than this process runs (each says ``robofmu build``);
-- the diagram (:func:`robofmu.system.check.plan`) and the roles the analysis needs;
-- ``--step-size`` / ``--stop-time``: finite and > 0, the stop time a whole number of steps, and
-  the recording ((n + 1) rows x (signals + 1) x 8 bytes) within half the available memory;
+- ``--step-size`` / ``--stop-time``: finite and > 0, the stop time a whole number of steps
+  (:func:`robofmu.system.usage.timing`);
+- the run's plan, in one pass (:func:`robofmu.system.plan.plan` through :meth:`Master.check`):
+  the diagram, each block's sample time a whole multiple of the base step, and the recording
+  ((n + 1) rows x (signals + 1) x 8 bytes) within half the available memory; then the roles the
+  analysis needs;
 - ``--out``: a folder that can be created, or replaced
   (:class:`~robofmu.system.usage.OutputFolder`).
 
@@ -36,7 +39,7 @@ from robofmu.system import analysis, experiment
 from robofmu.system.diagram import System, parameter_address
 from robofmu.system.master import DiagramError, Interrupted, Master, Result, SimulationError
 from robofmu.system.roles import Roles, check_roles
-from robofmu.system.usage import OutputFolder, UsageError, check_fmu_folder, check_times, times_given, timing
+from robofmu.system.usage import OutputFolder, UsageError, check_fmu_folder, times_given, timing
 
 __all__ = ["Run", "figures_of", "progress_printer", "reference_check", "run_experiment", "said_section",
            "summary_line"]
@@ -119,14 +122,6 @@ def figures_of(system, result: Result, roles: Roles, out: Path, order: list[str]
     if solver is not None:                         # an iterative solver's recorded diagnostics
         made.append(solver)
     return made
-
-
-def _check_memory(system: System, master: Master, n: int, step: float | None, stop_time: float | None) -> None:
-    """Refuse (UsageError) a run whose recording would not fit in memory (:meth:`Master.memory_problem`)."""
-    problem = master.memory_problem(n)
-    if problem:
-        raise UsageError(f"{times_given(system, step, stop_time)}: {problem}; use a larger --step-size or a "
-                         "shorter --stop-time")
 
 
 def _short_report(name: str, text: str, said: list[str] | None = None) -> str:
@@ -277,7 +272,6 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
         The run failed: ``out_dir`` holds ``results.csv`` with the points recorded so far and a
         short report naming the failure.
     """
-    check_times(step, stop_time)
     if results_format not in ("csv", "parquet"):
         raise UsageError(f"--format {results_format}: choose csv or parquet")
     results = f"results.{results_format}"
@@ -288,18 +282,20 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
             system = experiment.with_parameters(system, parameters)
         except ValueError as exc:
             raise UsageError(f"--set {exc}") from None
-    h, stop, n = timing(system, step, stop_time)
+    run_times = timing(system, step, stop_time)
     check_fmu_folder(system)
     master = Master(system, progress=progress_printer(system.name) if progress else None, debug=debug)
     try:
-        warnings = master.check()
+        warnings = master.check(run_times)
     except DiagramError as exc:
         raise DiagramError(str(system.source or system.name), exc.problems) from None
     roles = check_roles(system, master)
-    _check_memory(system, master, n, step, stop_time)
+    if master.plan.memory:
+        raise UsageError(f"{times_given(system, step, stop_time)}: {master.plan.memory}; use a larger --step-size "
+                         "or a shorter --stop-time")
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
-    refused = reference_check(system, master, parameters, h) if parameters else None
+    refused = reference_check(system, master, parameters, run_times.step) if parameters else None
     if refused:
         settings = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in parameters.items())
         print(f"warning: --set {settings}: the build's reference check refuses the reference: {refused}",
@@ -308,7 +304,7 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus",
     final = folder.path if folder.given.is_absolute() else folder.given
     try:
         try:
-            result = master.run(stop_time=stop, step=h, algorithm=algorithm)
+            result = master.run(algorithm=algorithm)
         except SimulationError as exc:
             kept = exc.result
             if kept is None or not len(kept.time):      # nothing recorded: the folder stays as it was

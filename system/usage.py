@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
-from robofmu.system.check import step_count
+from robofmu.system.plan import Times, times
 from robofmu.system.diagram import System
 
 __all__ = ["OUTPUTS", "PARTIAL", "OutputFolder", "Outputs", "UsageError", "atomic_file", "check_fmu_folder",
@@ -290,14 +290,14 @@ def check_replaceable(path: str | Path, option: str, owned: Callable[[Path], boo
 
 def check_memory(need: int, where: str, fix: str) -> None:
     """Refuse (:class:`UsageError`) an allocation of ``need`` bytes that would take more than half
-    the memory available (:func:`robofmu.system.master.available_memory`), the rule ``robofmu run``
+    the memory available (:func:`robofmu.system.plan.available_memory`), the rule ``robofmu run``
     applies to its recording; the message names ``where`` (the option or file and key) and says
     what to do (``fix``)."""
-    from robofmu.system.master import _gigabytes, available_memory
+    from robofmu.system.plan import available_memory, gigabytes
 
     free = available_memory()
     if free is not None and need > free / 2:
-        raise UsageError(f"{where}: needs {_gigabytes(need)} of memory, more than half of the {_gigabytes(free)} "
+        raise UsageError(f"{where}: needs {gigabytes(need)} of memory, more than half of the {gigabytes(free)} "
                          f"available; {fix}")
 
 
@@ -365,28 +365,28 @@ def times_given(system: System, step: float | None, stop_time: float | None) -> 
                      if value is not None) or str(system.source or system.name)
 
 
-def timing(system: System, step: float | None, stop_time: float | None) -> tuple[float, float, int]:
-    """The step, stop time and number of steps of the run, checked (UsageError naming --step-size /
-    --stop-time or the file)."""
+def timing(system: System, step: float | None, stop_time: float | None) -> Times:
+    """The run's times (:func:`robofmu.system.plan.times`, the one check), each value named as
+    the option that gave it or as the experiment file's key (UsageError, one line)."""
     check_times(step, stop_time)
     source = system.source or system.name
-    h = system.step if step is None else float(step)
-    stop = system.stop_time if stop_time is None else float(stop_time)
-    stop_text = f"--stop-time {stop:g} s" if stop_time is not None else f"the stop time {stop:g} s (stop_time in {source})"
-    step_text = f"--step-size {h:g} s" if step is not None else f"{h:g} s (the step in {source}; or give --step-size)"
-    given = times_given(system, step, stop_time)
-    ratio = stop / h
-    if not ratio <= 1e15:
-        raise UsageError(f"{given}: {ratio:.3g} steps, far more than memory can record; use a larger --step-size "
-                         "or a shorter --stop-time")
-    if round(ratio) < 1:
-        raise UsageError(f"{stop_text} is shorter than one step of {step_text}")
+
+    def named(key: str, value: float, given: bool) -> str:
+        if key == "stop_time":
+            return f"--stop-time {value:g} s" if given else f"the stop time {value:g} s (stop_time in {source})"
+        if key == "step":
+            return f"--step-size {value:g} s" if given else f"{value:g} s (the step in {source}; or give --step-size)"
+        return f"the start time {value:g} s"
+
     try:
-        n = step_count(0.0, stop, h)
-    except ValueError:
-        hint = " (give --stop-time too)" if step is not None and stop_time is None else ""
-        raise UsageError(f"{stop_text} is not a whole number of steps of {step_text}{hint}") from None
-    return h, stop, n
+        return times(system, 0.0, stop_time, step, named)
+    except ValueError as exc:
+        text = str(exc)
+        if "far more than memory" in text:
+            text += "; use a larger --step-size or a shorter --stop-time"
+        elif "whole number of steps" in text and step is not None and stop_time is None:
+            text += " (give --stop-time too)"
+        raise UsageError(text) from None
 
 
 # -- one-line answers ------------------------------------------------------------------------------

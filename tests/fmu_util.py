@@ -3,7 +3,7 @@
 - :func:`open_block`: one instantiated, initialized FMU;
 - :func:`robot_blocks`: ``(robot, block)`` test parameters over the whole collection;
 - :class:`Loop`: an experiment's diagram stepped by hand, for tests that need the blocks between
-  two steps (FMU state). Its topology is the experiment's (``robofmu.system.check.plan``: the
+  two steps (FMU state). Its topology is the experiment's (``robofmu.system.plan.plan``: the
   wires and the evaluation order), nothing is wired here; a test that only needs a loop run
   drives :class:`robofmu.system.master.Master` instead;
 - :class:`RawInstance`: one instance through fmpy's ``FMU2Slave`` with the raw FMI functions
@@ -24,7 +24,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 
 from robofmu.components.robots import available, load_description
 from robofmu.system import experiment
-from robofmu.system.check import plan
+from robofmu.system.plan import plan
 from robofmu.system.fmu import FMUInstance
 
 

@@ -24,7 +24,7 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from fmu_util import assert_same_run, robot_experiments  # noqa: E402
 from robofmu.system import experiment  # noqa: E402
-from robofmu.system.check import Link, plan  # noqa: E402
+from robofmu.system.plan import Link, plan  # noqa: E402
 from robofmu.system.interop.container import (container_order, export_container,  # noqa: E402
                                       model_identifier, run_container)
 from robofmu.system.master import Master, SimulationError  # noqa: E402

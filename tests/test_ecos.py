@@ -22,7 +22,7 @@ import pytest
 
 from fmu_util import assert_same_run, real_columns, robot_experiments
 from robofmu.system import experiment
-from robofmu.system.check import plan
+from robofmu.system.plan import plan
 from robofmu.system.master import Master, SimulationError
 from robofmu.system.result import Result
 from robofmu.system.interop.ssp import NS, export_ssp, load_ecospy, run_ssp_ecos, ssd_text

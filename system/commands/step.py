@@ -216,7 +216,7 @@ def _stop_time(args, design, joints: int) -> float:
     """The stop time (s): ``--stop-time`` or the default (3 x the designed settling time), a whole
     number of steps; UsageError naming ``--step-size`` and ``--stop-time`` for a step longer than
     the run, and for a run whose recording would not fit in memory."""
-    from robofmu.system.check import step_count
+    from robofmu.system.plan import step_count
 
     stop_time = args.stop_time
     if stop_time is None:

@@ -73,7 +73,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from robofmu.system.packaging import fmi_export
-from robofmu.system.check import Plan, plan, step_count
+from robofmu.system.plan import Plan, plan, single_rate, step_count
 from robofmu.system.diagram import System, select
 from robofmu.system.defaults import ALGORITHMS
 from robofmu.system.master import SimulationError
@@ -140,8 +140,10 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
     Raises
     ------
     ValueError
-        An unknown algorithm, a diagram the master refuses (DiagramError), or a parameter the
-        container cannot take (fmu-manipulation-toolbox's message).
+        An unknown algorithm, a diagram the master refuses (DiagramError), a multi-rate diagram
+        (the container steps every block at one step: refused in one line,
+        :func:`~robofmu.system.plan.single_rate`), or a parameter the container cannot take
+        (fmu-manipulation-toolbox's message).
     """
     from fmu_manipulation_toolbox.container import FMUContainer, FMUContainerError
 
@@ -149,6 +151,7 @@ def export_container(system: System, path: str | Path, algorithm: str | None = N
     if algorithm not in ALGORITHMS:
         raise ValueError(f"algorithm {algorithm!r}: choose one of {', '.join(ALGORITHMS)}")
     path = Path(path)
+    single_rate(system, "an FMU container")          # no standard rate per component
     planned = plan(system)
     try:
         order = container_order(planned)

@@ -103,7 +103,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from robofmu.system.check import plan, step_count, variable_unit
+from robofmu.system.plan import plan, single_rate, step_count, variable_unit
 from robofmu.system.diagram import System, coerce, expand, select, spread
 from robofmu.system.result import Result
 from robofmu.system.usage import atomic_file
@@ -209,9 +209,12 @@ def _xml_bytes(root: ET.Element) -> bytes:
 def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     """Write ``system`` as an SSP 1.0 package (``.ssp`` zip) at ``path``; returns the path.
 
-    The diagram is planned first exactly as the master plans it (:func:`~robofmu.system.check.plan`:
+    The diagram is planned first exactly as the master plans it (:func:`~robofmu.system.plan.plan`:
     FMUs valid, wires typed and matching, no algebraic loop; nothing is instantiated): a diagram
-    the master refuses is not exported (DiagramError).
+    the master refuses is not exported (DiagramError). SSP has no standard rate per component:
+    a multi-rate system (a block's ``sample_time`` other than the step) is refused in one line
+    saying so (ValueError; :func:`~robofmu.system.plan.single_rate`), and so is libcosim's run
+    of the export.
 
     Parameters
     ----------
@@ -223,6 +226,7 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
         Parameter sets inline in the SSD instead of ``resources/<block>.ssv`` files.
     """
     path = Path(path)
+    single_rate(system, "SSP")          # no standard rate per component
     planned = plan(system)
 
     # FMUs under resources/: one copy per distinct file, names made unique

@@ -77,7 +77,7 @@ def block_parameter(system, instance: str, name: str, vectors: bool = True):
         return spec.parameters[name]
     from fmpy import read_model_description
 
-    from robofmu.system.check import start_values
+    from robofmu.system.plan import start_values
 
     return start_values(read_model_description(str(system.fmu_path(spec)), validate=False),
                         vectors=vectors).get(name)

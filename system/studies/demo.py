@@ -92,7 +92,7 @@ def _parameter(system, instance: str, name: str):
         return spec.parameters[name]
     from fmpy import read_model_description
 
-    from robofmu.system.check import start_values
+    from robofmu.system.plan import start_values
 
     return start_values(read_model_description(str(system.fmu_path(spec)), validate=False)).get(name)
 

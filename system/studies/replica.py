@@ -28,7 +28,7 @@ from robofmu.components.robots import load_description, load_model
 from robofmu.components.robots.description import PROFILE_PREFIX
 
 from robofmu.system import defaults
-from robofmu.system.check import plan as check_plan, start_values, step_count
+from robofmu.system.plan import plan as check_plan, start_values, step_count
 from robofmu.system.diagram import System, coerce, expand, spread
 from robofmu.system.fmu import block_identity
 from robofmu.system.result import Result

@@ -23,7 +23,7 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from robofmu.system import defaults, experiment
-from robofmu.system.check import variable_unit
+from robofmu.system.plan import variable_unit
 from robofmu.system.diagram import coerce, expand
 from robofmu.system.master import DiagramError, Master
 from robofmu.system.roles import check_roles

@@ -18,15 +18,25 @@ compensates them, 0 leaves the losses unknown to it (the armature stays in its M
 Where the robot description asks for it (``[joints] saturate_effort = true``), tau is clipped to
 the joints' effort limits and the output ``saturated`` is true while any joint is clipped (one
 warning per excursion, naming the joint and the time).
+Computation delay: ``delay_steps`` = d (Integer, default 0) outputs at sample k the effort computed
+from the inputs of sample k - d (a sample: one doStep of the controller, its sample time); before
+sample d it outputs the effort of sample 0. The last d + 1 efforts wait in a ring buffer of
+preallocated rows, part of the FMU state. d = 0 is the undelayed law, unchanged.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..control import GAINS, ComputedTorque
+from ..parameters import Parameter
 from ..plant import JointLosses
 from .base import ContinuousBlock, vector_names
 from .plant import configured_losses, declare_losses
+
+
+#: The computation delay in controller samples (a FMU Integer parameter of the controller).
+DELAY_STEPS = Parameter("delay_steps", "Integer", "", "Computation delay: the effort computed from the inputs "
+                        "of one sample is output d samples later (0: at once)", 0, low=0, high=1000)
 
 
 class ControllerBlock(ContinuousBlock):
@@ -67,7 +77,9 @@ class ControllerBlock(ContinuousBlock):
         self.has_armature = declare_losses(self)
         self.real("loss_compensation", "parameter", "1", "Scales the damping and friction the controller adds "
                   "(1: the losses known to it, 0: unknown)", 1.0, low=0.0)
+        self.setting(DELAY_STEPS, 0)
         self.law = None
+        self._delay = 0
 
     def configure(self):
         self.robot.set_gravity(self.parameter("g"))
@@ -83,12 +95,25 @@ class ControllerBlock(ContinuousBlock):
         self._tau_out = v[self.tau]
         self._effort = self.robot.effort_limits()
         self._clipping = False
+        self._delay = self.parameter("delay_steps")
+        # efforts of the last d + 1 samples; row `_head` is this sample's (rows: views made once)
+        self._pending = np.zeros((self._delay + 1, self.robot.n))
+        self._rows = list(self._pending)
+        self._head = 0
+        self._samples = 0
         super().configure()
 
     def output(self, t):
         if self.has_payload:
             self.robot.set_payload(self.payload_mass if self.values[self.grip] else 0.0)
-        self.law.torque_into(*self._inputs, self._tau_out)
+        if self._delay:
+            now = self._rows[self._head]
+            self.law.torque_into(*self._inputs, now)
+            if not self._samples:                  # before sample d: the effort of sample 0
+                self._pending[:] = now
+            self._tau_out[:] = self._rows[(self._head + 1) % (self._delay + 1)]
+        else:
+            self.law.torque_into(*self._inputs, self._tau_out)
         if self.saturates:
             self._saturate(t)
 
@@ -107,13 +132,21 @@ class ControllerBlock(ContinuousBlock):
     def advance(self, t, h):
         q_ref, _, _, q, _ = self._inputs
         self.law.advance(q_ref, q, h)
+        if self._delay:
+            self._head = (self._head + 1) % (self._delay + 1)
+            self._samples += 1
 
     def internal_state(self):
-        return {"z": None if self.law is None else [float(x) for x in self.law.z]}
+        if self.law is None:
+            return {"z": None}
+        return {"z": [float(x) for x in self.law.z], "pending": self._pending.tolist(), "head": self._head,
+                "samples": self._samples}
 
     def set_internal_state(self, state):
         if self.law is not None and state.get("z") is not None:
             self.law.z[:] = state["z"]
+            self._pending[:] = state["pending"]
+            self._head, self._samples = int(state["head"]), int(state["samples"])
 
     def continuous_state(self):
         return self.law.z.copy()

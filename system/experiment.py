@@ -444,10 +444,10 @@ def _with_loop(path: Path, data: dict) -> dict:
                 raise ExperimentError(path, f"blocks[{k}].fmu", f"missing key: {block['name']!r} is no derived "
                                                                f"block (derived: {', '.join(names)}), so it needs "
                                                                "its fmu")
-            derived = blocks[names.index(block["name"])]
-            derived["parameters"] = {**derived["parameters"], **block.get("parameters", {})}
+            amended = blocks[names.index(block["name"])]
+            amended["parameters"] = {**amended["parameters"], **block.get("parameters", {})}
             if "sample_time" in block:
-                derived["sample_time"] = block["sample_time"]
+                amended["sample_time"] = block["sample_time"]
         elif block["name"] in names:
             blocks[names.index(block["name"])] = block
         else:

@@ -16,7 +16,9 @@ naming the key to change:
   reference, where the IK stops on a limit, the path solved again without position limits
   tells how deep it would go);
 - a singularity (the IK's smallest singular value below its ``singular_value``), named as such;
-- a target the IK cannot reach.
+- a target the IK cannot reach;
+- a reference that does not start at home (where the plant starts, at rest), with the profile's
+  way to start there.
 
 The ``home`` configuration must lie within the position limits too.
 """
@@ -38,6 +40,9 @@ __all__ = ["ReferenceCheck", "ReferenceRefused", "check_reference", "check_refer
 MARGIN = 1.005
 #: Proposals tried at most, each checked along the whole path, before the last is given.
 ATTEMPTS = 4
+#: How far (rad or m) the reference's first joint positions may lie from home, where the plant
+#: starts at rest, before the loop would jump at t = 0.
+START_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -139,6 +144,8 @@ def check_reference(description: RobotDescription, step_size: float = 1e-3,
     where = f"{description.path}: {table}: "
     if sampled.failure is not None:
         raise ReferenceRefused(where + _failure(description, robot, sampled, step_size))
+    if len(sampled.times) and np.max(np.abs(sampled.q[0] - home)) > START_TOLERANCE:
+        raise ReferenceRefused(where + _away(robot, description, table, sampled.q[0], home))
     beyond = _deepest(robot, description, sampled, lower, upper)
     if beyond:
         raise ReferenceRefused(where + beyond)
@@ -288,6 +295,27 @@ def _slower(description, table: str, duration: float, ratio: float, speed, step_
 def _toml(value) -> str:
     """A proposed value as the TOML takes it."""
     return f"[{', '.join(f'{v:g}' for v in value)}]" if isinstance(value, list) else f"{value:g}"
+
+
+def _away(robot, description: RobotDescription, table: str, start: np.ndarray, home: np.ndarray) -> str:
+    """A reference that does not start where the plant does (home, at rest), told with the fix."""
+    j = int(np.argmax(np.abs(start - home)))
+    unit = robot.joint_units(0)[j]
+    task = ""
+    if all(u == "m" for u in robot.task_units(0)):
+        task = f" (the task point {1e3 * np.linalg.norm(robot.fk(start) - robot.fk(home)):.4g} mm from its place at home)"
+    kind = description.trajectory.kind if description.trajectory is not None else ""
+    inspect = f"robofmu inspect {description.path.name} prints it"
+    fix = {"joint_bangbang": f"give {table}.q_start = home",
+           "line": f"leave {table}.start out (it defaults to the task point at home)",
+           "pose_line": f"leave {table}.start and start_quaternion out (they default to the tool's pose at home)",
+           "waypoints": f"give {table}.relative = true with the rows as offsets from home's task point, or home's "
+                        f"task point as the first row of {table}.waypoints ({inspect})",
+           "pose_waypoints": f"give the tool's pose at home as the first row of {table}.waypoints ({inspect}: "
+                             "position, quaternion)"}.get(kind, "start the path where home puts the robot")
+    return (f"the reference does not start at home, where the plant starts at rest: at t = 0 it puts joint {j + 1} "
+            f"({robot.joint_names[j]}) at {start[j]:.6g} {unit}, {abs(start[j] - home[j]):.3g} {unit} from home's "
+            f"{home[j]:.6g}{task}, a jump; {fix}")
 
 
 def _home_fix(value: float, lower: float, upper: float, unit: str, state: bool) -> str:

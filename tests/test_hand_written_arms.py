@@ -140,10 +140,25 @@ def _case_too_fast(tmp):
              "give trajectory.durations = ["])
 
 
+def _case_start_away_from_home(tmp):
+    """Absolute waypoints typed with a first row 50 mm off the tool at home (FK by an independent
+    Pinocchio model): the loop would jump at t = 0."""
+    model = pin.buildModelFromUrdf(str(_installed(XARM7)))
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, np.array(eval(XARM7_HOME)))
+    at_home = data.oMf[model.getFrameId("link_eef")].translation
+    first = at_home + [0.05, 0.0, 0.0]
+    rows = [[float(v) for v in first], [float(v) for v in at_home + [0.1, 0.0, 0.0]]]
+    trajectory = f'profile = "waypoints"\nwaypoints = {rows}\ndurations = [1.0]\n'
+    return (_write(tmp, "xarm7", XARM7, "link_eef", XARM7_HOME, trajectory=trajectory),
+            ["trajectory: the reference does not start at home", "the task point 50 mm from its place at home",
+             "give trajectory.relative = true", "first row of trajectory.waypoints (robofmu inspect xarm7.toml"])
+
+
 @pytest.mark.parametrize("case", [_case_locked_fixed, _case_locked_missing, _case_home_after_chain,
                                   _case_home_gripper_not_locked, _case_limits_off_chain, _case_chain_swapped,
                                   _case_chain_other_arm, _case_srdf_state_beyond_a_limit, _case_srdf_of_another_urdf,
-                                  _case_too_fast], ids=lambda case: case.__name__[6:])
+                                  _case_too_fast, _case_start_away_from_home], ids=lambda case: case.__name__[6:])
 def test_a_hand_written_mistake_is_refused_naming_key_joint_and_fix(tmp_path, capfd, case):
     path, names = case(tmp_path)
     line = assert_refused(capfd, ["build", path, "--out", tmp_path / "fmus"], f"robofmu build: {path}: ", *names)

@@ -121,7 +121,7 @@ MISTAKES = {
                           ["stop time 13 s", "--step-size 0.003 s", "give --stop-time"]),
     "stop-below-step": (["run", "chess-pd", "--stop-time", "0.0004", "--fmus", "{fmus}"], ["--stop-time 0.0004 s is shorter"]),
     "too-many-steps": (["run", "chess-pd", "--step-size", "1e-9", "--stop-time", "1000", "--fmus", "{fmus}"],
-                       ["--step-size 1e-09, --stop-time 1000", "1000000000000 steps x 36 recorded signals", "memory"]),
+                       ["--step-size 1e-09, --stop-time 1000", "1000000000000 steps x {signals} recorded signals", "memory"]),
     "absurd-steps": (["run", "chess-pd", "--step-size", "1e-300", "--stop-time", "1e300"], ["--step-size 1e-300", "steps"]),
     "out-is-a-file": (["run", "chess-pd", "--out", "afile", "--fmus", "{fmus}"],
                       ["--out afile: exists and is a file, not a folder"]),
@@ -168,7 +168,11 @@ def _fill(text: str, values: dict) -> str:
 @pytest.fixture(scope="module")
 def answers(work, fmu_root):
     """Every mistake's CompletedProcess (and the fragments to look for), run concurrently."""
-    values = {"fmus": fmu_root, "broken": work / "broken", "readonly": readonly_target(work)}
+    from robofmu.system import experiment
+    from robofmu.system.plan import plan
+
+    signals = len(plan(experiment.load("chess-pd", fmu_dir=fmu_root)).recorded)     # what chess-pd records
+    values = {"fmus": fmu_root, "broken": work / "broken", "readonly": readonly_target(work), "signals": signals}
     cases = {name: ([_fill(a, values) for a in args], [_fill(f, values) for f in fragments])
              for name, (args, fragments) in MISTAKES.items()}
     with ThreadPoolExecutor(max_workers=4) as pool:

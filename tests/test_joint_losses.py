@@ -28,8 +28,14 @@ OWN_URDF = ("planar2r", "rrp", "chess", "rpp")
 
 def with_dynamics(copy_robot, robot: str, damping, friction, edit=None):
     """``robot``'s folder copied, ``<dynamics damping friction>`` written into each movable joint of
-    its URDF (in document order); returns the TOML's path and the movable joints' names."""
-    toml = copy_robot(robot, edit)
+    its URDF (in document order), and ``[joints] urdf_dynamics = true``; returns the TOML's path and
+    the movable joints' names."""
+    def asked(data):
+        data.setdefault("joints", {})["urdf_dynamics"] = True
+        if edit is not None:
+            edit(data)
+
+    toml = copy_robot(robot, asked)
     urdf = toml.parent / tomllib.loads(toml.read_text())["urdf"]
     tree = ElementTree.parse(urdf)
     movable = [j for j in tree.getroot().findall("joint") if j.get("type") in ("revolute", "prismatic", "continuous")]
@@ -67,6 +73,21 @@ def test_the_urdf_reader_gives_damping_and_friction(copy_robot):
     assert [(urdf.joints[n].damping, urdf.joints[n].friction) for n in names] == [(0.5, 0.1), (0.25, 0.0), (2.0, 3.0)]
     fixed = [j for j in urdf.joints.values() if j.type == "fixed"]
     assert all(j.damping == 0.0 and j.friction == 0.0 for j in fixed)        # none given: 0
+
+
+def test_the_urdfs_dynamics_act_only_when_asked(copy_robot):
+    """Without ``[joints] urdf_dynamics = true`` the URDF's <dynamics> are read (the reader gives
+    them) but the joints' losses are the TOML's alone: zero here; with it, the URDF's numbers."""
+    asked, names = with_dynamics(copy_robot, "rrp", [0.5, 0.25, 2.0], [0.1, 0.0, 3.0])
+    data = tomllib.loads(asked.read_text())
+    assert data["joints"]["urdf_dynamics"] is True
+    plain = asked.parent / "plain.toml"
+    plain.write_text(asked.read_text().replace("urdf_dynamics = true", "urdf_dynamics = false")
+                     .replace('name = "rrp"', 'name = "plain"'))
+    damping, friction, _ = load_model(plain).joint_losses()
+    assert damping.tolist() == friction.tolist() == [0.0, 0.0, 0.0]
+    damping, friction, _ = load_model(asked).joint_losses()
+    assert damping.tolist() == [0.5, 0.25, 2.0] and friction.tolist() == [0.1, 0.0, 3.0]
 
 
 @pytest.mark.parametrize("attribute, value, problem", [
@@ -310,6 +331,8 @@ default_gains = "pd"
 [task]
 frame = "tip"
 coordinates = ["x", "y"]
+[joints]
+urdf_dynamics = true
 [configurations]
 home = [0.0]
 [gains.pd]

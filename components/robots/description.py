@@ -34,6 +34,8 @@ Schema (every table but those marked optional is required)::
                                          # names, else 0 clipped into its limits), floating and
                                          # planar joints dropped, mimic followers with their leader
     saturate_effort = false              # the controller clips tau to the effort limits
+    urdf_dynamics = false                # true: the URDF's <dynamics damping friction> act in the plant
+                                         # (default false: many URDFs carry a simulator's placeholders)
     [joints.limits.elbow]                # a joint's limits where the URDF has none (or others):
     lower = -2.0                         # rad or m; upper too; velocity (rad/s, m/s); effort
     velocity = 3.0                       # (N.m, N); inf: none. A URDF joint whose position
@@ -272,6 +274,9 @@ class RobotDescription:
     joint_limits : dict of str to dict of str to float
         Limits by joint that replace the URDF's (``[joints.limits.<joint>]``: ``lower``, ``upper``
         (rad, m), ``velocity`` (rad/s, m/s), ``effort`` (N.m, N); inf: none).
+    urdf_dynamics : bool
+        Whether the URDF's ``<dynamics damping friction>`` are the joints' losses
+        (``[joints] urdf_dynamics``, default False: only ``[joints.dynamics]`` counts).
     saturate_effort : bool
         Whether the controller clips its efforts to the effort limits.
     joint_dynamics : dict of str to dict of str to float
@@ -302,6 +307,7 @@ class RobotDescription:
     tables: tuple[str, ...] = ()
     joint_limits: dict[str, dict[str, float]] = field(default_factory=dict)
     saturate_effort: bool = False
+    urdf_dynamics: bool = False
     joint_dynamics: dict[str, dict[str, float]] = field(default_factory=dict)
     xacro_args: dict[str, str] = field(default_factory=dict)
     srdf: Path | None = None
@@ -710,12 +716,12 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
     if ("ik" in blocks) != (ik is not None):
         top.fail("ik", "an [ik] table is needed exactly when `blocks` lists 'ik'")
 
-    locked, limits, saturate, chain, losses = {}, {}, False, None, {}
+    locked, limits, saturate, chain, losses, urdf_dynamics = {}, {}, False, None, {}, False
     joints = top.table("joints", None)
     if joints is not None:
         if mechanism is not None:
             top.fail("joints", "a [mechanism] describes its joints in its own table")
-        joints.unknown({"locked", "limits", "saturate_effort", "chain", "dynamics"})
+        joints.unknown({"locked", "limits", "saturate_effort", "chain", "dynamics", "urdf_dynamics"})
         if "chain" in joints.data:
             chain = joints.strings("chain", _REQUIRED)
             if len(chain) != 2:
@@ -738,6 +744,9 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
         saturate = joints.data.get("saturate_effort", False)
         if not isinstance(saturate, bool):
             joints.fail("saturate_effort", f"must be true or false, got {saturate!r}")
+        urdf_dynamics = joints.data.get("urdf_dynamics", False)
+        if not isinstance(urdf_dynamics, bool):
+            joints.fail("urdf_dynamics", f"must be true or false, got {urdf_dynamics!r}")
 
     tables = []
     for where, choice in [("trajectory", trajectory)] + [(f"trajectories.{k}", v) for k, v in profiles.items()]:
@@ -757,7 +766,7 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
         gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
         trajectory=trajectory, ik=ik,
         mechanism=mechanism, locked=locked, profiles=profiles, tables=tuple(dict.fromkeys(tables)),
-        joint_limits=limits, saturate_effort=saturate, joint_dynamics=losses, xacro_args=xacro_args, srdf=srdf, states=states,
+        joint_limits=limits, saturate_effort=saturate, urdf_dynamics=urdf_dynamics, joint_dynamics=losses, xacro_args=xacro_args, srdf=srdf, states=states,
         srdf_configurations=named_states, chain=chain)
     if not named_states:
         return description

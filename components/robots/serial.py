@@ -194,12 +194,13 @@ def _set_limits(model: pin.Model, description: RobotDescription, urdf: Urdf) -> 
 def _set_dynamics(model: pin.Model, description: RobotDescription, urdf: Urdf) -> None:
     """The joints' losses and rotor inertias as data, in Pinocchio's ``damping``, ``friction`` and
     ``armature`` (one per velocity coordinate): the checked URDF's ``<dynamics>`` (damping,
-    friction; no armature), the description's ``[joints.dynamics.<joint>]`` over them. Pinocchio's
+    friction; no armature) where the description asks for them (``[joints] urdf_dynamics``), the
+    description's ``[joints.dynamics.<joint>]`` over them. Pinocchio's
     CRBA, RNEA, ABA and kinetic energy add ``armature`` to M's diagonal; ``damping`` and
     ``friction`` are data only (the plant and the controller apply them)."""
     fields = {"damping": "damping", "friction": "friction", "armature": "armature"}
     arrays = {key: np.zeros(model.nv) for key in fields}
-    for j in range(1, model.njoints):
+    for j in range(1, model.njoints if description.urdf_dynamics else 1):
         if model.joints[j].nv == 1 and model.names[j] in urdf.joints:
             for key in ("damping", "friction"):
                 arrays[key][model.joints[j].idx_v] = getattr(urdf.joints[model.names[j]], key)

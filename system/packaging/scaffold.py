@@ -553,6 +553,12 @@ def plan(name: str, urdf_path: Path, urdf_ref, out: Path, frame: str | None = No
                                       f"{len(tries)} tries; the last: {tries[-1]}")
         if tries:
             notes.append(f"{len(tries)} larger or faster moves refused by the reference check, the first: {tries[0]}")
+        lossy = [j for j in chain.joints if urdf.joints[j].damping or urdf.joints[j].friction]
+        if lossy:
+            notes.append(f"the URDF gives {len(lossy)} chain joints <dynamics> (damping up to "
+                         f"{max(urdf.joints[j].damping for j in lossy):g}, friction up to "
+                         f"{max(urdf.joints[j].friction for j in lossy):g}); the plant ignores them unless "
+                         "[joints] urdf_dynamics = true")
         move_time = duration
         header = [f"chain: {chain.base} -> {chain.tool}, {n} joints; tool {what}",
                   f"home: {home.source}: smallest singular value {home.sigma_min:.3g}, joints at least "

@@ -165,13 +165,7 @@ class OutputFolder:
         staging, path = self.staging, self.path
         if staging is None:
             raise RuntimeError("OutputFolder.commit before open")
-        if path.is_dir():
-            mode = path.stat().st_mode & 0o7777
-        else:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o777 & ~umask
-        os.chmod(staging, mode)                 # mkdtemp makes it 0o700
+        os.chmod(staging, _kept_mode(path, 0o777))      # mkdtemp makes it 0o700
         old = None
         if path.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
@@ -243,6 +237,16 @@ def _probe(folder: Path) -> str | None:
     return None
 
 
+
+def _kept_mode(path: Path, full: int) -> int:
+    """The permission bits a replacement of ``path`` gets: those of what is there, else ``full``
+    less the umask (what a plain open or mkdir would give)."""
+    if path.exists():
+        return path.stat().st_mode & 0o7777
+    umask = os.umask(0)
+    os.umask(umask)
+    return full & ~umask
+
 @contextmanager
 def atomic_file(path: str | Path) -> Iterator[Path]:
     """Write a file atomically: yields a temporary sibling ``.<name>.<random>.partial`` (created
@@ -259,13 +263,7 @@ def atomic_file(path: str | Path) -> Iterator[Path]:
     partial = Path(name)
     try:
         yield partial
-        if path.is_file():
-            mode = path.stat().st_mode & 0o7777
-        else:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.chmod(partial, mode)                 # mkstemp makes it 0o600
+        os.chmod(partial, _kept_mode(path, 0o666))      # mkstemp makes it 0o600
         os.replace(partial, path)
     finally:
         partial.unlink(missing_ok=True)

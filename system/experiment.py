@@ -58,6 +58,8 @@ from robofmu.system import defaults
 from robofmu.system.diagram import System, Wire, parameter_address
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
+#: The ``BLOCK.PARAM`` name of a block's sample time in an override (:func:`with_parameters`).
+SAMPLE_TIME = "sample_time"
 
 
 #: Roles an experiment may name, and what each means.
@@ -539,13 +541,18 @@ def load(name_or_path: str | Path, fmu_dir: str | Path | None = None) -> System:
 
 
 def with_parameters(system: System, values: dict) -> System:
-    """A copy of ``system`` with block parameters set, ``{"controller.kp": 400.0, ...}``.
+    """A copy of ``system`` with block parameters set, ``{"controller.kp": 400.0, ...}``: the one
+    override of an experiment (``robofmu run --set``, a sweep's ``--vary``).
+
+    ``BLOCK.sample_time`` (:data:`SAMPLE_TIME`) sets the block's sample time in s, as ``[[blocks]]
+    sample_time`` does, not a FMU parameter.
 
     Raises
     ------
     ValueError
         Naming the entry, for a name that is not ``BLOCK.PARAM`` or names no block of the
-        experiment. (An unknown parameter, or a value of the wrong type, is refused when the
+        experiment, or a sample time that is no number > 0. (An unknown parameter, a value of the
+        wrong type, a sample time that is no whole multiple of the step, is refused when the
         diagram is planned: :meth:`robofmu.system.master.Master.check`.)
     """
     import copy
@@ -559,5 +566,11 @@ def with_parameters(system: System, values: dict) -> System:
             raise ValueError(f"{name}: expected BLOCK.PARAM (e.g. controller.kp)") from None
         if block not in names:
             raise ValueError(f"{name}: no block {block!r} in {system.name} (blocks: {', '.join(names)})")
-        configured.block(block).parameters[parameter] = value
+        if parameter == SAMPLE_TIME:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0 \
+                    or not math.isfinite(value):
+                raise ValueError(f"{name}: must be a time in s > 0, got {value!r}")
+            configured.block(block).sample_time = float(value)
+        else:
+            configured.block(block).parameters[parameter] = value
     return configured

@@ -12,6 +12,8 @@ Columns (joint j = 1 .. n; joint units rad or m, effort units N·m or N):
   (:meth:`~robofmu.system.roles.Roles.measures_orientation`): for a pose task the largest rotation
   angle from quat_ref to the frame, else max |FK(q)_i - x_ref_i| over the task coordinates
   measured in rad (3rrp);
+- ``final_tcp_error`` (m), ``final_orientation_error`` (rad): the same two at the last point
+  (the end pose), where the run has them;
 - ``max_joint_error``: the largest ``max_joint_error[j]``;
 - ``peak_effort``: the largest ``peak_effort[j]``, where the experiment has efforts;
 - ``settling_time`` (s): see :func:`~robofmu.system.analysis.settling_time` (empty where it
@@ -30,13 +32,16 @@ from robofmu.system.roles import Roles
 __all__ = ["METRIC_UNITS", "metric_names", "metrics_of"]
 
 #: The metrics whose unit is the same for every robot (the joint ones are rad or m per joint).
-METRIC_UNITS = {"max_tcp_error": "m", "max_orientation_error": "rad", "settling_time": "s"}
+METRIC_UNITS = {"max_tcp_error": "m", "max_orientation_error": "rad", "final_tcp_error": "m",
+                "final_orientation_error": "rad", "settling_time": "s"}
 
 
 def metric_names(roles: Roles, model: RobotModel) -> list[str]:
     """The metric columns of an experiment with these roles on this robot, in order."""
     names = ["max_tcp_error"] if roles.x_ref else []
     names += ["max_orientation_error"] if roles.measures_orientation(model) else []
+    names += ["final_tcp_error"] if roles.x_ref else []
+    names += ["final_orientation_error"] if roles.measures_orientation(model) else []
     names += ["max_joint_error"] + (["peak_effort"] if roles.tau else []) + ["settling_time"]
     for j in range(1, model.n + 1):
         names += [f"max_joint_error[{j}]", f"rms_joint_error[{j}]", f"final_joint_error[{j}]"]
@@ -51,6 +56,9 @@ def metrics_of(tracking: Tracking, result: Result, roles: Roles) -> dict[str, fl
         record["max_tcp_error"] = float(tracking.tcp_error.max())
         if tracking.orientation_error is not None:
             record["max_orientation_error"] = float(tracking.orientation_error.max())
+        record["final_tcp_error"] = float(tracking.tcp_error[-1])
+        if tracking.orientation_error is not None:
+            record["final_orientation_error"] = float(tracking.orientation_error[-1])
     record["max_joint_error"] = float(tracking.max_error.max())
     if roles.tau:
         record["peak_effort"] = float(tracking.peak_effort.max())

@@ -79,9 +79,9 @@ def _message(text: str) -> str:
 def reproduce_command(run: SweepRun, row: dict) -> str:
     """The ``robofmu run`` command that runs one row of the sweep alone.
 
-    Each varied ``BLOCK.PARAM`` becomes ``--set BLOCK.PARAM=VALUE`` (the value as recorded); a
-    varied step size, or the design's fixed step, ``--step-size``; the design's stop time
-    ``--stop-time``.
+    Each varied ``BLOCK.PARAM`` becomes ``--set BLOCK.PARAM=VALUE`` (the value as recorded; a
+    vector parameter, one ``--set BLOCK.PARAM[j]=VALUE`` per element); a varied step size, or the
+    design's fixed step, ``--step-size``; the design's stop time ``--stop-time``.
     """
     design = run.design
     words = ["robofmu", "run", shlex.quote(design.experiment)]
@@ -89,8 +89,10 @@ def reproduce_command(run: SweepRun, row: dict) -> str:
     for name in design.names:
         if name == STEP_SIZE_AXIS:
             step = row[name]
-        else:
-            words += ["--set", shlex.quote(f"{name}={_exact(row[name])}")]
+            continue
+        elements = [f"{name}[{j}]" for j in range(1, run.widths[name] + 1)] if name in run.widths else [name]
+        for element in elements:
+            words += ["--set", shlex.quote(f"{element}={_exact(row[name])}")]
     if step:
         words += ["--step-size", _exact(step)]
     if design.stop_time is not None:

@@ -33,6 +33,9 @@ class SweepRun:
         Unit of each varied parameter and metric column that has one.
     name, description : str
         The experiment's name and description.
+    widths : dict
+        The element count of each varied vector parameter (``plant.friction``: 6), which one value
+        sets alike.
     """
 
     design: Design
@@ -47,6 +50,7 @@ class SweepRun:
     units: dict = field(default_factory=dict)
     name: str = ""
     description: str = ""
+    widths: dict = field(default_factory=dict)
 
     @property
     def failed(self) -> list:

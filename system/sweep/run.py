@@ -20,10 +20,11 @@ from __future__ import annotations
 import os
 import time
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 from robofmu.system import defaults, experiment
-from robofmu.system.plan import variable_unit
+from robofmu.system.plan import plan, variable_unit
 from robofmu.system.diagram import coerce, expand
 from robofmu.system.master import DiagramError, Master
 from robofmu.system.roles import check_roles
@@ -35,6 +36,7 @@ from robofmu.system.sweep.journal import Journal, key_of
 from robofmu.system.sweep.metrics import METRIC_UNITS, metric_names
 from robofmu.system.sweep.report import write_report
 from robofmu.system.sweep.result import SweepRun
+from robofmu.system.sweep.worker import block_settings
 from robofmu.system.usage import UsageError, check_fmu_folder, check_memory, check_times, check_writable, owned_by, timing
 
 __all__ = ["SweepInterrupted", "SweepRun", "check", "run_sweep"]
@@ -68,6 +70,24 @@ def _folder(out: Path, design: Design) -> bool:
     return True
 
 
+def _check_sample_times(system, base, axis, steps, stop_time) -> None:
+    """Refuse (UsageError naming ``--vary``) a varied sample time that is no number > 0, or no
+    whole multiple of a step the sweep runs at (the plan's one rule: :meth:`Plan.timed` of the
+    experiment's plan ``base`` with that sample time)."""
+    if axis.random:
+        raise UsageError(f"--vary {axis.name}: a sample time is varied over a grid only (a comma list or a range)")
+    for value in axis.values:
+        try:
+            configured = experiment.with_parameters(system, {axis.name: value})
+        except ValueError as exc:
+            raise UsageError(f"--vary {exc}") from None
+        for h in steps:
+            try:
+                replace(base, system=configured).timed(timing(system, h, stop_time))
+            except DiagramError as exc:
+                raise UsageError(f"--vary {axis.name}={value:g}: {'; '.join(exc.problems)}") from None
+
+
 def check(design: Design, fmu_dir):
     """The experiment's System (FMU paths absolute), checked against the design; its Roles,
     metric columns, units and the design's runs with typed values."""
@@ -89,23 +109,34 @@ def check(design: Design, fmu_dir):
             raise UsageError(f"--vary {axis.name}: no block {axis.block!r} in {system.name} "
                              f"(blocks: {', '.join(names)})")
     runs = design.runs()
-    master = Master(experiment.with_parameters(system, {k: v for k, v in runs[0].items() if k != STEP_SIZE_AXIS}))
     try:
-        master.check()
+        base = plan(system)
     except DiagramError as exc:
-        raise DiagramError(f"{system.source or system.name} with --vary", exc.problems) from None
-    roles = check_roles(system, master)
+        raise DiagramError(str(system.source or system.name), exc.problems) from None
     units, kinds = {STEP_SIZE_AXIS: "s"}, {}
     for axis in design.axes:
         if axis.name == STEP_SIZE_AXIS:
             continue
-        node = master.nodes[axis.block]
+        if axis.parameter == experiment.SAMPLE_TIME:
+            _check_sample_times(system, base, axis, steps or [design.step], design.stop_time)
+            kinds[axis.name], units[axis.name] = "Real", "s"
+            continue
+        node = base.nodes[axis.block]
         variables = [node.variables[v] for v in expand(node.variables, axis.parameter)]
+        if not variables:
+            raise UsageError(f"--vary {axis.name}: unknown parameter {axis.parameter!r} of block {axis.block!r} "
+                             f"({node.path.name})")
         if any(v.causality != "parameter" for v in variables):
             raise UsageError(f"--vary {axis.name}: {axis.parameter!r} of {axis.block} is not a parameter")
         kinds[axis.name] = variables[0].type
         if variable_unit(variables[0]):
             units[axis.name] = variable_unit(variables[0])
+    master = Master(experiment.with_parameters(system, block_settings(system, runs[0])))
+    try:
+        master.check(timing(system, (steps or [design.step])[0], design.stop_time))
+    except DiagramError as exc:
+        raise DiagramError(f"{system.source or system.name} with --vary", exc.problems) from None
+    roles = check_roles(system, master)
     try:
         typed = [{k: (v if k == STEP_SIZE_AXIS else coerce(kinds[k], v, f"--vary {k}")) for k, v in run.items()}
                  for run in runs]
@@ -215,8 +246,9 @@ def run_sweep(design: Design, out: str | Path, fmu_dir: str | Path = defaults.FM
             interrupted = True
     seconds = time.perf_counter() - start
     rows = journal.finish(keys)
+    widths = {name: len(value) for name, value in block_settings(system, runs[0]).items() if isinstance(value, list)}
     result = SweepRun(design, out, rows, metrics, len(rows) - reused, reused, seconds, count, [], units,
-                      system.name, system.description)
+                      system.name, system.description, widths)
     write_report(result, figures=figures and not interrupted, metric=metric, threshold=threshold,
                  interrupted=interrupted)
     if interrupted:

@@ -16,19 +16,48 @@ import time
 from pathlib import Path
 
 from robofmu.system import analysis
-from robofmu.system.experiment import with_parameters
+from robofmu.system.diagram import expand, parameter_address
+from robofmu.system.experiment import SAMPLE_TIME, with_parameters
 from robofmu.system.master import Master, SimulationError
 from robofmu.system.roles import Roles
 from robofmu.system.sweep.design import STEP_SIZE_AXIS
 from robofmu.system.sweep.metrics import metrics_of
 
-__all__ = ["run_one", "simulate"]
+__all__ = ["block_settings", "run_one", "simulate"]
 
 _ONE_RUN_AT_A_TIME = threading.Lock()
 
 
+def block_settings(system, values: dict) -> dict:
+    """A run's ``values`` as the experiment's override takes them
+    (:func:`~robofmu.system.experiment.with_parameters`): the step size left out, and one number
+    for a vector parameter (``plant.friction``: every joint's) spread over its elements.
+
+    Parameters
+    ----------
+    system : System
+        The experiment (its FMUs are read for the vectors' lengths).
+    values : dict
+        ``BLOCK.PARAM`` (and :data:`~robofmu.system.sweep.design.STEP_SIZE_AXIS`) -> value.
+    """
+    from robofmu.system.plan import described
+
+    settings = {}
+    for name, value in values.items():
+        if name == STEP_SIZE_AXIS:
+            continue
+        block, parameter = parameter_address(name)
+        if parameter != SAMPLE_TIME and not isinstance(value, (list, tuple)):
+            model_description = described(system.fmu_path(system.block(block)))[1]
+            if model_description is not None:
+                width = len(expand([v.name for v in model_description.modelVariables], parameter))
+                value = [value] * width if width > 1 else value
+        settings[name] = value
+    return settings
+
+
 def simulate(system, values: dict, stop_time: float | None, step: float | None, everything: bool = False):
-    """Run ``system`` with the varied ``values`` set; returns (Result, Roles, Tracking).
+    """Run ``system`` with the varied ``values`` set (:func:`block_settings`); returns (Result, Roles, Tracking).
 
     ``values`` maps ``BLOCK.PARAM`` (and :data:`~robofmu.system.sweep.design.STEP_SIZE_AXIS`) to a value.
     Only the signals the metrics read (the experiment's roles) are recorded, unless
@@ -36,11 +65,10 @@ def simulate(system, values: dict, stop_time: float | None, step: float | None, 
     Raises what :meth:`Master.run` raises (SimulationError with the points recorded so far).
     """
     step = values.get(STEP_SIZE_AXIS, step)
-    configured = with_parameters(system, {k: v for k, v in values.items() if k != STEP_SIZE_AXIS})
+    configured = with_parameters(system, block_settings(system, values))
     roles = Roles.of(configured)
     master = Master(configured, record=None if everything else roles.signals())
-    master.check()
-    result = master.run(stop_time=stop_time, step=step)
+    result = master.run(stop_time=stop_time, step=step)        # planned against this run's step
     return result, roles, analysis.tracking_metrics(result, roles)
 
 

@@ -219,3 +219,16 @@ def test_in_process_loop_converges_at_first_order(chess_pd):
         errs.append(np.abs(r.vector("plant.q") - mono.evaluate(r.time).vector("plant.q")).max())
     assert 0.9 <= observed_order(steps, errs) <= 1.1
     assert errs[-1] < 3e-4
+
+
+def test_the_replica_refuses_a_block_with_a_sample_time_of_its_own(fmu_root):
+    """The in-process replica and the monolithic reference step every block at the base step: a
+    multi-rate experiment (the controller at 4 ms) is refused naming the block, not run wrongly."""
+    from dataclasses import replace
+
+    system = load("chess-pd", fmu_dir=fmu_root)
+    blocks = [replace(b, sample_time=4 * system.step) if b.name == "controller" else b for b in system.blocks]
+    with pytest.raises(ValueError, match="blocks controller have a sample time of their own"):
+        InProcessDiagram(replace(system, blocks=blocks))
+    same = [replace(b, sample_time=system.step) for b in system.blocks]
+    InProcessDiagram(replace(system, blocks=same))            # the base step itself is no other rate

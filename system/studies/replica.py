@@ -16,6 +16,7 @@ parameters, and wires them as the experiment says (the master's checked plan). T
 """
 from __future__ import annotations
 
+import math
 import time as _time
 from dataclasses import dataclass
 
@@ -93,12 +94,18 @@ class InProcessDiagram:
     DiagramError
         If the diagram cannot run (the master's checks).
     ValueError
-        If a FMU is not a robofmu block or was built from other sources than this process runs.
+        If a FMU is not a robofmu block or was built from other sources than this process runs,
+        or if a block has a sample time of its own (the replica steps every block at the base step).
     """
 
     def __init__(self, system: System):
         self.system = system
         self.plan = check_plan(system)
+        slower = [b.name for b in system.blocks
+                  if b.sample_time is not None and not math.isclose(b.sample_time, system.step, rel_tol=1e-9)]
+        if slower:
+            raise ValueError(f"{system.name}: blocks {', '.join(slower)} have a sample time of their own; the "
+                             "in-process replica and the monolithic reference step every block at the base step")
         self.order = list(self.plan.order)
         self.blocks: dict[str, Block] = {}
         for name, node in self.plan.nodes.items():

@@ -339,6 +339,10 @@ def demo(out: Path, fmu_dir: str | Path = "fmus", quick: bool = False) -> int:
             body += workspace_section(entry, out)
         if plan.robustness is not None:
             body += robustness_section(plan.robustness, out, fmu_dir, quick)
+        if plan.sampled_loop is not None:
+            from robofmu.system.studies import sampled_loop
+
+            body += sampled_loop.section(plan.sampled_loop, out, fmu_dir, say=_say)
         if plan.interop is not None:
             body += interop_section(plan.interop, out, fmu_dir)
         body += accuracy_section(plan.accuracy, out, fmu_dir, quick)

@@ -18,8 +18,8 @@ from pathlib import Path
 
 from robofmu.system.usage import UsageError
 
-__all__ = ["PLAN", "DemoPlan", "ExperimentSection", "WorkspaceEntry", "RobustnessStudy", "InteropSection",
-           "AccuracyStudy", "GainDesignCase", "StepResponses", "read_plan"]
+__all__ = ["PLAN", "DemoPlan", "ExperimentSection", "WorkspaceEntry", "RobustnessStudy", "SampledLoopStudy",
+           "InteropSection", "AccuracyStudy", "GainDesignCase", "StepResponses", "read_plan"]
 
 #: The demo's plan, beside this module.
 PLAN = Path(__file__).resolve().parent / "demo.toml"
@@ -78,6 +78,24 @@ class RobustnessStudy:
 
 
 @dataclass(frozen=True)
+class SampledLoopStudy:
+    """``[sampled_loop]``: the loop as it runs on the robot (:mod:`~robofmu.system.studies.sampled_loop`).
+
+    ``experiment`` (a file beside the plan) runs at each of ``controller``'s ``sample_times`` (s)
+    and ``delay_steps`` (samples), its losses known to the controller or not
+    (``loss_compensation`` 1 or 0), as one sweep; ``stated`` lists the ``BLOCK.PARAM`` the report
+    states per joint (the losses the file gives)."""
+
+    title: str
+    experiment: Path
+    sample_times: tuple[float, ...]
+    delay_steps: tuple[float, ...]
+    stated: tuple[str, ...]
+    controller: str = "controller"
+    text: str = ""
+
+
+@dataclass(frozen=True)
 class InteropSection:
     """``[interop]``: the experiments run by other FMI tools for ``stop_time`` (s)."""
 
@@ -127,6 +145,7 @@ class DemoPlan:
     sections: tuple[ExperimentSection, ...] = ()
     workspace: tuple[WorkspaceEntry, ...] = ()
     robustness: RobustnessStudy | None = None
+    sampled_loop: SampledLoopStudy | None = None
     interop: InteropSection | None = None
 
 

@@ -35,9 +35,11 @@ MODULE_MARKERS = {
     "test_libcosim.py": ("interop",),
     "test_many_runs.py": ("slow",),
     "test_newton_study.py": ("study",),
+    "test_sampled_loop_study.py": ("study",),
     "test_ssp.py": ("interop",),
     "test_stepresponse.py": ("study",),
     "test_sweep.py": ("slow", "study"),                  # dask clusters: 10 of its 22 tests take 2 to 30 s
+    "test_sweep_axes.py": ("study",),
     "test_sweep_contract.py": ("study",),
     "test_sweep_design.py": ("study",),
     "test_sweep_report.py": ("study",),

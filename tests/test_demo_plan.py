@@ -10,7 +10,8 @@ import pytest
 from robofmu.components.robots import available as robots
 from robofmu.system.experiment import available as experiments
 from robofmu.system.studies.plan import (PLAN, AccuracyStudy, DemoPlan, ExperimentSection, GainDesignCase,
-                                         InteropSection, RobustnessStudy, StepResponses, WorkspaceEntry, read_plan)
+                                         InteropSection, RobustnessStudy, SampledLoopStudy, StepResponses,
+                                         WorkspaceEntry, read_plan)
 from robofmu.system.usage import UsageError
 
 
@@ -32,6 +33,21 @@ def test_the_plan_reads_into_its_dataclasses():
     assert (chess.seed_table, chess.bangbang, chess.cross_check, chess.tutorial) == (None, False, False, None)
     assert chess.diagnostics == ExperimentSection.__dataclass_fields__["diagnostics"].default
     assert all(isinstance(h, float) for h in plan.accuracy.step_sizes + plan.accuracy.quick_step_sizes)
+
+
+def test_the_plan_knows_the_sampled_loop_study():
+    """[sampled_loop]: the UR5's pose line with the study's own joint losses, at 1000, 500 and 250 Hz and
+    0 or 1 sample of delay (its losses known or not: the study's third axis)."""
+    from robofmu.system.experiment import load
+
+    study = read_plan().sampled_loop
+    assert isinstance(study, SampledLoopStudy) and study.experiment == PLAN.parent / "ur5_joint_losses.toml"
+    assert study.sample_times == (0.001, 0.002, 0.004) and study.delay_steps == (0.0, 1.0)
+    system = load(study.experiment)
+    assert system.extra["robot"] == "ur5" and system.name == "ur5-pose-losses" and system.step == 0.001
+    plant = system.block("plant").parameters
+    assert all(len(plant[p]) == 6 and min(plant[p]) > 0 for p in ("damping", "friction", "friction_velocity"))
+    assert all(name.startswith("plant.") for name in study.stated)
 
 
 @pytest.fixture
@@ -73,6 +89,10 @@ def test_an_unedited_copy_reads_the_same(plan_copy):
      "no such file seed000_a3.csv beside the plan"),
     ("bangbang = true", 'bangbang = "yes"', "sections[3].bangbang", "must be true or false, got 'yes'"),
     ("threshold = 0.001", 'threshold = "1 mm"', "robustness.threshold", "must be a finite number, got '1 mm'"),
+    ('experiment = "ur5_joint_losses.toml"', 'experiment = "ur5_losses.toml"', "sampled_loop.experiment",
+     "no such file ur5_losses.toml beside the plan"),
+    ("sample_times = [0.001, 0.002, 0.004]", "sample_times = 0.001", "sampled_loop.sample_times",
+     "must be a list, got 0.001"),
     ('experiments = { PD = "chess-pd-unknown-pawn", PID = "chess-pid-unknown-pawn" }',
      'experiments = { PD = "chess-pd-unknown-pawn", PID = "chess-pid-unknown" }', "robustness.experiments.PID",
      "unknown experiment 'chess-pid-unknown'"),

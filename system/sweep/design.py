@@ -8,6 +8,11 @@
 - a distribution for random sampling, ``uniform(LOW,HIGH)`` or ``normal(MEAN,STD)``, drawn
   ``--samples`` times from a generator seeded with ``--seed``.
 
+``BLOCK.sample_time`` varies a block's sample time (s; a grid only, each value a whole multiple of
+every step the sweep runs at), ``controller.delay_steps`` its computation delay; a vector
+parameter given one value (``plant.friction``) sets every element to it
+(:func:`~robofmu.system.sweep.worker.block_settings`), ``plant.friction[2]`` one element.
+
 The runs are the Cartesian product of the grid axes (in the order given, the last varying
 fastest), each crossed with every random sample when there are distributions. The samples are
 drawn before anything runs, in one fixed order, so the same design always gives the same runs.

@@ -389,12 +389,13 @@ def _move(robot, home, pose: bool, length: float, scale: float, duration: float)
     if pose:
         return {"profile": "pose_line", "displacement": [round(float(v), 4) for v in distance * d],
                 "rotation": [0.0, 0.0, scale * ROTATION], "duration": duration}
-    # from the tool at home; a trapezoid whose ramps take a third of the duration each: v = 1.5 L / T,
-    # a = 4.5 L / T^2 (L the length of the rounded displacement)
+    # from the tool at home; a trapezoid whose ramps take a third of the duration each (L the length
+    # of the rounded displacement): cruise v = L / (T - ramp), acceleration v / ramp
     displacement = [round(float(v), 4) for v in distance * d]
     length = float(np.linalg.norm(displacement))
-    return {"profile": "line", "displacement": displacement, "v_max": 1.5 * length / duration,
-            "a_max": 4.5 * length / duration ** 2}
+    ramp = duration / 3.0
+    cruise = length / (duration - ramp)
+    return {"profile": "line", "displacement": displacement, "v_max": cruise, "a_max": cruise / ramp}
 
 
 def first_move(pose: bool) -> dict:

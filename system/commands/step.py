@@ -17,6 +17,17 @@ in memory (:func:`~robofmu.system.usage.check_memory`).
 
 ``--robot`` is a robot of the package by name or the path of a robot TOML anywhere (as for
 ``robofmu build``); either way its FMUs are ``<--fmus>/<its name>/{controller,plant}.fmu``.
+
+The loop as it runs on a robot: ``--sample-time TS`` (a whole multiple of ``--step-size``) makes
+the controller sample every TS, ``--delay-steps D`` outputs its effort D samples late, ``--set
+BLOCK.PARAM=VALUE`` changes a block parameter (``plant.friction[2]=0.5``: joint losses the
+controller does not know) and ``--friction-unknown`` sets ``controller.loss_compensation`` to 0.
+With any of them the ``sampled`` model is the loop at TS with D
+(:func:`~robofmu.system.stepresponse.sampled.predict_sampled`), and the report adds the largest
+stable kp at TS and D (kd held) and, per stepped joint with Coulomb friction unknown to the
+controller, the stop short predicted, measured and missed. Without them the command is as before.
+A response whose error grows is reported ``UNSTABLE`` naming the block, the joint and the time
+(exit status 0: the run itself worked).
 """
 from __future__ import annotations
 
@@ -83,6 +94,19 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="start configuration, joint units (default: the robot's home configuration)")
     options.add_stop_time(p, what=f"{defaults.STOP_TIME:g}, or 3 x --settling-time", old=("--t-end",))
     options.add_algorithm(p, default=defaults.ALGORITHM)
+    p.add_argument("--sample-time", type=float, metavar="TS",
+                   help="the controller's sample time in s, a whole multiple of --step-size (the plant still steps "
+                        "at --step-size); the sampled model and the stability limit follow it (default: --step-size)")
+    p.add_argument("--delay-steps", type=int, metavar="D",
+                   help="computation delay: the controller outputs the effort of a sample D samples later "
+                        "(default: 0)")
+    p.add_argument("--set", action="append", metavar=options.PARAMETER_SETTING,
+                   help="set a plant or controller parameter (repeatable), e.g. plant.friction[2]=0.5 (joint "
+                        "losses the controller does not know); not the gains, the start or the reference, which "
+                        "have their options")
+    p.add_argument("--friction-unknown", action="store_true",
+                   help="the controller does not compensate the joints' damping and friction "
+                        "(controller.loss_compensation = 0); the report gives the stop short they cause")
     p.add_argument("--driver", dest="algorithm", choices=tuple(_DRIVER_ALGORITHMS), action=_Driver,
                    help=argparse.SUPPRESS)
     options.add_fmus(p)
@@ -182,8 +206,55 @@ BYTES_PER_STEP_AND_JOINT = 4 * 8 * 5
 
 
 def _stem(args) -> str:
-    """The file names' stem: ``step_h1ms``."""
-    return f"step_h{args.step_size * 1e3:g}ms"
+    """The file names' stem: ``step_h1ms`` (``step_h1ms_ts4ms_d1`` with ``--sample-time`` or ``--delay-steps``)."""
+    stem = f"step_h{args.step_size * 1e3:g}ms"
+    if args.sample_time is not None or args.delay_steps is not None:
+        stem += f"_ts{(args.sample_time or args.step_size) * 1e3:g}ms_d{args.delay_steps or 0}"
+    return stem
+
+
+#: Parameters the step experiment sets itself, by ``--set`` name: the option that gives them.
+_OWN_SETTINGS = {"controller.kp": "--kp", "controller.kd": "--kd", "controller.ki": "--ki",
+                 "controller.gain_scale": "--kp/--kd/--ki", "controller.q_ref": "--amplitude",
+                 "controller.delay_steps": "--delay-steps", "controller.sample_time": "--sample-time",
+                 "plant.q0": "--q0", "plant.qd0": "a step from rest"}
+
+
+def _sampled(args) -> dict:
+    """The loop as on a robot: ``sample_time``, ``delay_steps`` and ``parameters`` for
+    :func:`~robofmu.system.stepresponse.cosimulate_step`, {} without the options (the command as
+    before); UsageError naming the option: a sample time that is not a whole multiple of
+    ``--step-size``, a negative or too large delay, a ``--set`` that is not BLOCK.PARAM=VALUE,
+    names another block, or sets what the step experiment sets itself."""
+    from robofmu.components.blocks.controller import DELAY_STEPS
+    from robofmu.system.stepresponse import CONTROLLER, PLANT
+
+    if args.sample_time is None and args.delay_steps is None and not args.set and not args.friction_unknown:
+        return {}
+    if args.sample_time is not None:
+        ratio = args.sample_time / args.step_size if math.isfinite(args.sample_time) else 0.0
+        if not (args.sample_time > 0.0 and round(ratio) >= 1 and abs(round(ratio) - ratio) <= 1e-9 * ratio):
+            raise UsageError(f"--sample-time {args.sample_time:g}: must be a whole multiple of --step-size "
+                             f"{args.step_size:g} s (1, 2, 3, ... times it)")
+    if args.delay_steps is not None and not DELAY_STEPS.low <= args.delay_steps <= DELAY_STEPS.high:
+        raise UsageError(f"--delay-steps {args.delay_steps}: must be a whole number from {DELAY_STEPS.low:g} "
+                         f"to {DELAY_STEPS.high:g}")
+    parameters = {}
+    for text in args.set or []:
+        try:
+            name, value = options.parse_setting(text)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        block, _, parameter = name.partition(".")
+        base = f"{block}.{parameter.split('[', 1)[0]}"
+        if block not in (CONTROLLER, PLANT):
+            raise UsageError(f"--set {text}: no block {block!r} in the step diagram (its blocks: {CONTROLLER}, {PLANT})")
+        if base in _OWN_SETTINGS:
+            raise UsageError(f"--set {text}: the step experiment sets {base} itself; give {_OWN_SETTINGS[base]}")
+        parameters[name] = value
+    if args.friction_unknown:
+        parameters[f"{CONTROLLER}.loss_compensation"] = 0.0
+    return dict(sample_time=args.sample_time, delay_steps=args.delay_steps, parameters=parameters)
 
 
 def _check_reference(args, robot, setup) -> None:
@@ -258,14 +329,16 @@ def main(args) -> int:
         design = _design(args)
         kp, kd, ki = _gains(args, robot, design)
         stop_time = _stop_time(args, design, len(setup.q0))
+        sampled = _sampled(args)
         check_fmu_folder(step_system(args.fmus, kp, kd, ki, robot=robot, amplitude=setup.amplitudes,
-                                     h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0))
+                                     h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0,
+                                     **sampled))
         if args.out is not None:
             check_writable(args.out, "--out")
             check_writable(Path(args.out) / f"{_stem(args)}_cosim.csv", "--out", file=True)
         result = cosimulate_step(Path(args.fmus), kp, kd, ki, robot=robot, amplitude=setup.amplitudes,
                                  h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0,
-                                 algorithm=args.algorithm)
+                                 algorithm=args.algorithm, **sampled)
     except (SimulationError, ValueError) as exc:     # ValueError: UsageError, DiagramError
         return stopped("step", exc)
     comparison = compare(result)

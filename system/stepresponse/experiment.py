@@ -17,6 +17,18 @@ A robot is given as everywhere in robofmu: a robot of the package by name, the p
 TOML anywhere (str or Path), or its :class:`~robofmu.components.robots.RobotDescription`; it is
 resolved once per call (:func:`~robofmu.components.robots.load_description`). Its FMUs are
 ``<fmu_dir>/<its name>/{controller,plant}.fmu``, as ``robofmu build`` writes them.
+
+The loop as it runs on a robot (any of ``sample_time``, ``delay_steps``, ``parameters`` given to
+:func:`cosimulate_step`): the controller samples every ``sample_time`` Ts (a whole number of base
+steps h; the plant still steps at h) and outputs its effort ``delay_steps`` = d samples late, and
+block parameters may make the plant's joint losses differ from what the controller compensates
+(``plant.friction[j]``, ``controller.loss_compensation`` = 0, ...). :func:`compare` then predicts
+with :func:`~.sampled.predict_sampled` (the ``sampled`` model, at Ts with d and the unknown
+viscous damping, the controller's start-up: the effort of its first sample until sample d),
+gives the kp stability limit (:func:`~.sampled.largest_stable_kp`, kd held) and, for Coulomb
+friction the controller does not know, the stop short predicted, measured and missed
+(:class:`FrictionMiss`). A response whose error grows is reported as unstable by name, with
+or without these options.
 """
 from __future__ import annotations
 
@@ -31,13 +43,15 @@ from robofmu.components.control import check_gains
 from robofmu.components.robots import ROBOTS_DIR, RobotDescription, available, load_description, load_model
 
 from robofmu.system import defaults
-from robofmu.system.diagram import BlockSpec, System
+from robofmu.system.diagram import BlockSpec, System, expand, spread
 from robofmu.system.master import Master, Result
 from robofmu.system.stepresponse.linear import MODEL_TEXT, MODELS, check_step, predict
 from robofmu.system.stepresponse.metrics import StepMetrics, step_metrics
+from robofmu.system.stepresponse.sampled import (friction_creep_time, friction_steady_state_error,
+                                                 largest_stable_kp, predict_sampled, spectral_radius)
 
-__all__ = ["CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "steppable_robots",
-           "default_amplitudes", "step_setup", "step_system", "cosimulate_step", "compare",
+__all__ = ["CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "FrictionMiss",
+           "steppable_robots", "default_amplitudes", "step_setup", "step_system", "cosimulate_step", "compare",
            "write_csv", "plot_comparison", "demo_cases"]
 
 #: Instance names of the two blocks of the step diagram (they prefix the recorded columns).
@@ -227,7 +241,9 @@ def _step_text(joints: Sequence[int], amplitudes: Sequence[float], symbols: Sequ
 def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: Robot,
                 amplitude: float | Sequence[float] | None = None, h: float = defaults.STEP_SIZE,
                 stop_time: float = defaults.STOP_TIME, joint: int | Sequence[int] | None = None,
-                q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM) -> System:
+                q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM,
+                sample_time: float | None = None, delay_steps: int | None = None,
+                parameters: dict | None = None) -> System:
     """The step-experiment diagram of ``robot``: controller + plant, q and qd fed back, tau forward.
 
     The controller's q_ref input (unconnected) starts at q0 + amplitude on the stepped joints;
@@ -251,6 +267,14 @@ def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, r
         Communication step and stop time (s).
     algorithm : one of :data:`~robofmu.system.defaults.ALGORITHMS`
         The system's master algorithm.
+    sample_time : float, optional
+        The controller's sample time Ts (s), a whole multiple of ``h`` (checked when the
+        diagram is planned); None: every step.
+    delay_steps : int, optional
+        The controller's ``delay_steps`` d (its samples); None: its default, 0.
+    parameters : dict, optional
+        ``{"plant.friction[2]": 0.5, "controller.loss_compensation": 0.0, ...}`` set over the
+        above (:func:`~robofmu.system.experiment.with_parameters`: ValueError naming the entry).
 
     Returns
     -------
@@ -259,13 +283,18 @@ def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, r
         its name for a robot of the package, else its TOML's absolute path); blocks
         :data:`CONTROLLER` and :data:`PLANT`.
     """
+    from robofmu.system.experiment import with_parameters
+
     kp, kd, ki = check_gains(kp, kd, ki)
     description = _steppable(robot)
     setup = step_setup(description, amplitude, joint, q0)
     name = description.name
-    return System(
-        blocks=[BlockSpec(CONTROLLER, f"{name}/controller.fmu",
-                          {"kp": kp, "kd": kd, "ki": ki, "q_ref": setup.q_ref.tolist()}),
+    controller = {"kp": kp, "kd": kd, "ki": ki, "q_ref": setup.q_ref.tolist()}
+    if delay_steps is not None:
+        controller["delay_steps"] = int(delay_steps)
+    system = System(
+        blocks=[BlockSpec(CONTROLLER, f"{name}/controller.fmu", controller,
+                          None if sample_time is None else float(sample_time)),
                 BlockSpec(PLANT, f"{name}/plant.fmu", {"q0": setup.q0.tolist()})],
         wires=[f"{PLANT}.q -> {CONTROLLER}.q", f"{PLANT}.qd -> {CONTROLLER}.qd",
                f"{CONTROLLER}.tau -> {PLANT}.tau"],
@@ -273,12 +302,52 @@ def step_system(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, r
         algorithm=algorithm, extra={"robot": _robot_argument(description)},
         description="reference step " + _step_text(setup.joints, setup.amplitudes[np.array(setup.joints) - 1],
                                                    setup.symbols, setup.joint_units))
+    return with_parameters(system, parameters) if parameters else system
+
+
+def _parameter_values(system: System, block: str) -> dict:
+    """What ``block`` of ``system`` starts with: its FMU's parameter and input defaults with the system's
+    settings over them, one entry per scalar variable (``friction[2]``)."""
+    from robofmu.system.plan import described, start_values
+
+    spec = system.block(block)
+    values = start_values(described(system.fmu_path(spec))[1])
+    for base, value in spec.parameters.items():
+        names = expand(values, base)
+        values.update(zip(names, spread(names, value, f"{block}.{base}")))
+    return values
+
+
+def _vector(values: dict, base: str, n: int) -> np.ndarray:
+    """The elements of ``base`` in ``values`` as floats, shape (n,); zeros where the block has none."""
+    names = expand(values, base)
+    return np.array([float(values[name]) for name in names]) if len(names) == n else np.zeros(n)
+
+
+def _unknown_losses(system: System, description: RobotDescription, q_ref: np.ndarray) -> dict:
+    """Per joint (lists, n): the plant's damping and Coulomb friction the controller does not add
+    (the plant's minus ``loss_compensation`` times the controller's own), the plant's friction
+    velocity scale, and the inertia m = 1 / (M^-1)_jj (kg.m^2 or kg) of the plant's model (its
+    armature included) at the held reference."""
+    n = q_ref.size
+    plant, controller = _parameter_values(system, PLANT), _parameter_values(system, CONTROLLER)
+    known = float(controller.get("loss_compensation", 1.0))
+    model = load_model(description)
+    if callable(getattr(model, "set_armature", None)) and expand(plant, "armature"):
+        model.set_armature(_vector(plant, "armature", n))
+    inertia = 1.0 / np.diag(np.linalg.inv(model.mass_matrix(q_ref)))
+    return {"unknown_damping": (_vector(plant, "damping", n) - known * _vector(controller, "damping", n)).tolist(),
+            "unknown_friction": (_vector(plant, "friction", n) - known * _vector(controller, "friction", n)).tolist(),
+            "friction_velocity": _vector(plant, "friction_velocity", n).tolist(),
+            "inertia": inertia.tolist()}
 
 
 def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: Robot,
                     amplitude: float | Sequence[float] | None = None, h: float = defaults.STEP_SIZE,
                     stop_time: float = defaults.STOP_TIME, joint: int | Sequence[int] | None = None,
-                    q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM) -> Result:
+                    q0: Sequence[float] | None = None, algorithm: str = defaults.ALGORITHM,
+                    sample_time: float | None = None, delay_steps: int | None = None,
+                    parameters: dict | None = None) -> Result:
     """Co-simulate a reference step of ``robot``'s computed-torque loop (controller + plant FMUs).
 
     Parameters
@@ -302,6 +371,9 @@ def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, 
         Start configuration (joint units); default the robot's ``home``.
     algorithm : one of :data:`~robofmu.system.defaults.ALGORITHMS`
         The :class:`~robofmu.system.master.Master`'s algorithm: "gauss-seidel" (default) or "jacobi".
+    sample_time, delay_steps, parameters
+        The controller's sample time Ts (s) and delay d (samples), block parameters over the
+        diagram's, as for :func:`step_system`.
 
     Returns
     -------
@@ -310,7 +382,10 @@ def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, 
         ``controller.tau[j]`` (N.m or N) at t_k = k h, shape (n_steps + 1,) each, with their
         units; ``info`` adds ``robot`` (its name), ``robot_file`` (its TOML), ``kp, kd, ki, h,
         amplitudes (list, n), joints, q0, q_ref (lists, n), joint_units, effort_units, symbols
-        (lists, n), algorithm, warnings``.
+        (lists, n), algorithm, warnings``; when any of ``sample_time``, ``delay_steps``,
+        ``parameters`` is given also ``sample_time`` (s, h if not given), ``delay_steps`` and
+        the unknown losses (:func:`_unknown_losses`: ``unknown_damping``, ``unknown_friction``,
+        ``friction_velocity``, ``inertia``, lists of n).
     """
     h = check_step(h)
     if algorithm not in defaults.ALGORITHMS:
@@ -318,20 +393,60 @@ def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, 
     description = _steppable(robot)
     setup = step_setup(description, amplitude, joint, q0)
     system = step_system(fmu_dir, kp, kd, ki, robot=description, amplitude=setup.amplitudes, h=h,
-                         stop_time=stop_time, joint=setup.joints, q0=setup.q0, algorithm=algorithm)
+                         stop_time=stop_time, joint=setup.joints, q0=setup.q0, algorithm=algorithm,
+                         sample_time=sample_time, delay_steps=delay_steps, parameters=parameters)
     master = Master(system, record=[f"{PLANT}.q*", f"{CONTROLLER}.tau*"])
     diagram_warnings = master.check()
+    sampled = {}
+    if sample_time is not None or delay_steps is not None or parameters:
+        sampled = dict(sample_time=h if sample_time is None else float(sample_time),
+                       delay_steps=0 if delay_steps is None else int(delay_steps),
+                       **_unknown_losses(system, description, setup.q_ref))
     result = master.run(float(stop_time), h, algorithm)
     result.info.update(robot=description.name, robot_file=str(description.path), kp=float(kp), kd=float(kd),
                        ki=float(ki), h=h,
                        amplitudes=setup.amplitudes.tolist(), joints=list(setup.joints), q0=setup.q0.tolist(),
                        q_ref=setup.q_ref.tolist(), joint_units=list(setup.joint_units),
                        effort_units=list(setup.effort_units), symbols=list(setup.symbols),
-                       algorithm=algorithm, warnings=diagram_warnings)
+                       algorithm=algorithm, warnings=diagram_warnings, **sampled)
     return result
 
 
 # -- comparison ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FrictionMiss:
+    """Coulomb friction the controller does not know, on one stepped joint: what it costs.
+
+    Attributes
+    ----------
+    joint : int
+        The joint (from 1).
+    coulomb : float
+        tau_c unknown to the controller (N.m or N).
+    inertia : float
+        m = 1 / (M^-1)_jj at the held reference (kg.m^2 or kg).
+    predicted : float
+        The stop short e = tau_c / (m kp) (0 for a PID) of
+        :func:`~.sampled.friction_steady_state_error`, joint unit.
+    creep_time : float
+        (s) :func:`~.sampled.friction_creep_time`: the smooth model's way out of the stick band;
+        a run much shorter than it ends near ``predicted``.
+    measured : float
+        How far short of the reference the co-simulation ended, sign(A) (A - y(t_end)), joint unit.
+    miss : float
+        How far the linear prediction (the ``sampled`` model, which settles on the reference) is
+        off at the end, sign(A) (y_predicted(t_end) - y(t_end)), joint unit.
+    """
+
+    joint: int
+    coulomb: float
+    inertia: float
+    predicted: float
+    creep_time: float
+    measured: float
+    miss: float
+
+
 @dataclass
 class Comparison:
     """A co-simulated step against the linear predictions (see :func:`compare`).
@@ -378,6 +493,21 @@ class Comparison:
         Start configuration (joint units).
     joint_units, effort_units, symbols : list of str, length n_joints
         From the robot model ("rad" / "m", "N.m" / "N", "q1", ...).
+    sample_time : float or None
+        The controller's sample time Ts (s) of a step run as on a robot (:func:`cosimulate_step`
+        with ``sample_time``, ``delay_steps`` or ``parameters``); None: every step, the
+        ``sampled`` model being :func:`~.linear.discrete_prediction`.
+    delay_steps : int
+        The controller's delay d (samples).
+    kp_limit : float or None
+        The largest stable kp (1/s^2) at Ts and d with kd and ki held, the model exact
+        (:func:`~.sampled.largest_stable_kp`); None without ``sample_time``, or if no kp is stable.
+    spectral_radius : float or None
+        Largest |pole| of the predicted loop at the run's gains (< 1: stable).
+    friction : list of FrictionMiss
+        One per stepped joint with Coulomb friction unknown to the controller.
+    divergence : str
+        "" unless the co-simulated error grew: then one line naming the block, the joint and the time.
     """
 
     time: np.ndarray
@@ -399,6 +529,19 @@ class Comparison:
     joint_units: list = field(default_factory=list)
     effort_units: list = field(default_factory=list)
     symbols: list = field(default_factory=list)
+    sample_time: float | None = None
+    delay_steps: int = 0
+    kp_limit: float | None = None
+    spectral_radius: float | None = None
+    friction: list = field(default_factory=list)
+    divergence: str = ""
+
+    def model_text(self, model: str) -> str:
+        """One line describing ``model`` (:data:`~.linear.MODEL_TEXT`; ``sampled`` at Ts with d)."""
+        if model == "sampled" and self.sample_time is not None:
+            return (f"sampled-data loop, controller every {self.sample_time * 1e3:g} ms, "
+                    f"{self.delay_steps} sample{'s' * (self.delay_steps != 1)} late (predict_sampled)")
+        return MODEL_TEXT[model]
 
     def unit(self, joint: int) -> str:
         """Unit of joint ``joint``'s position (from 1): "rad" or "m"."""
@@ -428,8 +571,11 @@ class Comparison:
         """Metrics of every stepped joint and model, then the deviations, as aligned text."""
         g = self.gains
         start = ", ".join(f"{q:g} {u}" for q, u in zip(self.q0, self.joint_units))
+        rate = ("" if self.sample_time is None else
+                f"; controller every {self.sample_time * 1e3:g} ms, {self.delay_steps} sample"
+                f"{'s' * (self.delay_steps != 1)} late")
         lines = [f"{self.robot}: step {self.step_text()} from q0 = ({start}); kp {g['kp']:g}, "
-                 f"kd {g['kd']:g}, ki {g['ki']:g}; h {self.h * 1e3:g} ms; algorithm {self.algorithm}",
+                 f"kd {g['kd']:g}, ki {g['ki']:g}; h {self.h * 1e3:g} ms{rate}; algorithm {self.algorithm}",
                  f"{'response':<24}{'rise (s)':>10}{'settle (s)':>12}{'overshoot %':>13}"
                  f"{'peak time (s)':>15}{'peak':>12}{'final':>12}  unit"]
         for name, m in self.metrics.items():
@@ -441,12 +587,39 @@ class Comparison:
             per_joint = ", ".join(f"{self.symbol(j)} {d:.3f}"
                                   for j, d in zip(self.joints, self.deviation[model]))
             lines.append(f"  {model:<11} {self.max_deviation(model):8.3f} %   ({per_joint})  "
-                         f"{MODEL_TEXT[model]}")
+                         f"{self.model_text(model)}")
         if self.crosstalk.size:
             lines.append(f"  unstepped joints moved by at most {self.crosstalk_percent:.3f} % of their "
                          "amplitude")
         lines.append(f"best match: {self.best()}")
+        lines.extend(self._sampled_lines())
+        if self.divergence:
+            lines.append(self.divergence)
         return "\n".join(lines)
+
+    def _sampled_lines(self) -> list[str]:
+        """The stability limit and the unknown friction's cost, for a run with ``sample_time``."""
+        if self.sample_time is None:
+            return []
+        g, ts, d = self.gains, self.sample_time, self.delay_steps
+        where = f"Ts {ts * 1e3:g} ms, d {d}, kd {g['kd']:g}" + (f", ki {g['ki']:g}" if g["ki"] else "")
+        if self.kp_limit is None:
+            lines = [f"stability limit: no kp is stable at {where}"]
+        else:
+            lines = [f"stability limit: largest stable kp {self.kp_limit:.6g} 1/s^2 at {where} held (python-control's "
+                     f"discrete poles); kp {g['kp']:g} is {g['kp'] / self.kp_limit * 100:.1f} % of it, spectral "
+                     f"radius {self.spectral_radius:.5f}"]
+        for f in self.friction:
+            k = self.joints.index(f.joint)
+            unit, amplitude = self.unit(f.joint), abs(float(self.amplitudes[k]))
+            effort = self.effort_units[f.joint - 1]
+            off = f" ({(f.measured / f.predicted - 1) * 100:+.1f} %)" if f.predicted else ""
+            lines.append(f"friction unknown to the controller, {self.symbol(f.joint)}: Coulomb {f.coulomb:g} {effort}, "
+                         f"m {f.inertia:.5g}: stops short by {f.predicted:.5g} {unit} predicted (tau_c / (m kp); "
+                         f"creep time {f.creep_time:.3g} s), measured {f.measured:.5g} {unit}{off} at "
+                         f"t = {self.time[-1]:g} s; the linear prediction misses it by {f.miss:.5g} {unit} "
+                         f"({abs(f.miss) / amplitude * 100:.2f} % of the amplitude)")
+        return lines
 
 
 def _units_of(result: Result, n: int) -> tuple[list, list, list]:
@@ -481,6 +654,10 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
         Deviations (max over samples of |co-simulated - predicted|, % of each joint's amplitude)
         and the metrics of both (steady state taken as the reference q0 + amplitude, which a
         perfect model reaches; the record may end before the PID's slow integral mode has).
+        For a run with ``sample_time`` in its ``info`` (see :func:`cosimulate_step`) the
+        ``sampled`` model is :func:`~.sampled.predict_sampled` at Ts with d, each joint's unknown
+        damping b / m and the controller's start-up (``startup="first"``; the model's metrics
+        are those of the first stepped joint's), with the stability limit and the friction rows.
     """
     info = result.info
     kp, kd, ki, h = info["kp"], info["kd"], info["ki"], info["h"]
@@ -493,10 +670,18 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
     amplitudes = all_amplitudes[stepped]
     response = y[:, stepped]
     crosstalk = y[:, np.array(others, dtype=int) - 1] if others else np.zeros((len(t), 0))
+    ts, d = info.get("sample_time"), int(info.get("delay_steps", 0))
+    beta = (np.asarray(info["unknown_damping"])[stepped] / np.asarray(info["inertia"])[stepped]
+            if ts is not None else np.zeros(len(joints)))
     unit_responses, predictions, deviation = {}, {}, {}
     for model in models:
-        unit_responses[model] = predict(kp, kd, ki, t - t[0], 1.0, model, h)
-        predictions[model] = unit_responses[model][:, None] * amplitudes[None, :]
+        if model == "sampled" and ts is not None:
+            columns = {b: predict_sampled(kp, kd, ki, t - t[0], 1.0, ts, d, b, h=h, startup="first") for b in set(beta)}
+            unit_responses[model] = columns[beta[0]]
+            predictions[model] = np.column_stack([columns[b] for b in beta]) * amplitudes[None, :]
+        else:
+            unit_responses[model] = predict(kp, kd, ki, t - t[0], 1.0, model, h)
+            predictions[model] = unit_responses[model][:, None] * amplitudes[None, :]
         deviation[model] = np.max(np.abs(response - predictions[model]), axis=0) / np.abs(amplitudes) * 100.0
     metrics: dict[str, StepMetrics] = {}
     for j, amplitude, column in zip(joints, amplitudes, response.T):
@@ -511,13 +696,67 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
         scale = np.abs(all_amplitudes[np.array(others) - 1])
         crosstalk_percent = float(np.max(np.max(np.abs(crosstalk), axis=0) / scale) * 100.0)
     joint_units, effort_units, symbols = _units_of(result, q0.size)
+    sampled = {}
+    if ts is not None:
+        try:
+            kp_limit = largest_stable_kp(kd, ts, d, ki)
+        except ValueError:                   # no kp is stable at this kd, ki, Ts and d
+            kp_limit = None
+        sampled = dict(sample_time=ts, delay_steps=d, kp_limit=kp_limit,
+                       spectral_radius=spectral_radius(kp, kd, ki, ts, d),
+                       friction=_friction_misses(info, joints, amplitudes, response, predictions.get("sampled"), beta))
+    rate = "" if ts is None else f", controller every {ts * 1e3:g} ms, {d} sample{'s' * (d != 1)} late"
     return Comparison(time=t, joints=joints, amplitudes=amplitudes, response=response,
                       crosstalk_joints=others, crosstalk=crosstalk, predictions=predictions,
                       deviation=deviation, crosstalk_percent=crosstalk_percent, metrics=metrics,
                       result=result, gains={"kp": kp, "kd": kd, "ki": ki}, h=h,
                       algorithm=info.get("algorithm", defaults.ALGORITHM), robot=info.get("robot", ""),
                       q0=q0.tolist(), joint_units=joint_units, effort_units=effort_units,
-                      symbols=symbols)
+                      symbols=symbols, divergence=_divergence(t, response, amplitudes, joints, symbols, kp, rate),
+                      **sampled)
+
+
+def _friction_misses(info: dict, joints: list, amplitudes: np.ndarray, response: np.ndarray,
+                     predicted: np.ndarray | None, beta: np.ndarray) -> list[FrictionMiss]:
+    """A :class:`FrictionMiss` per stepped joint whose plant has Coulomb friction the controller
+    does not add (``info``'s unknown losses, from :func:`cosimulate_step`)."""
+    misses = []
+    for k, j in enumerate(joints):
+        coulomb = float(info["unknown_friction"][j - 1])
+        if coulomb <= 0.0:
+            continue
+        inertia, sign = float(info["inertia"][j - 1]), float(np.sign(amplitudes[k]))
+        creep = friction_creep_time(info["kp"], info["kd"], info["ki"], info["sample_time"], coulomb, inertia,
+                                    float(info["friction_velocity"][j - 1]), info["delay_steps"], float(beta[k]))
+        end = float(response[-1, k])
+        misses.append(FrictionMiss(
+            joint=j, coulomb=coulomb, inertia=inertia,
+            predicted=friction_steady_state_error(info["kp"], coulomb, inertia, info["ki"]), creep_time=creep,
+            measured=sign * (float(amplitudes[k]) - end),
+            miss=sign * ((float(predicted[-1, k]) if predicted is not None else float(amplitudes[k])) - end)))
+    return misses
+
+
+def _divergence(t: np.ndarray, response: np.ndarray, amplitudes: np.ndarray, joints: list, symbols: list,
+                kp: float, rate: str) -> str:
+    """"" for a step whose error |y - A| shrinks; else one line: unstable, the controller's loop,
+    the joint whose error grew most from the run's first fifth to its last, and when.
+
+    The error of a stable loop decays (its largest value after the step's first fifth is below
+    the first fifth's); that of a loop beyond its stability limit grows geometrically."""
+    fifth = max(len(t) // 5, 1)
+    if len(t) < 10:
+        return ""
+    error = np.abs(response - amplitudes[None, :]) / np.abs(amplitudes)[None, :]
+    first, last = np.max(error[:fifth], axis=0), np.max(error[-fifth:], axis=0)
+    growth = last / first
+    k = int(np.argmax(growth))
+    if not growth[k] > 1.0:
+        return ""
+    at = len(t) - fifth + int(np.argmax(error[-fifth:, k]))
+    return (f"UNSTABLE: the loop of block {CONTROLLER!r} (kp {kp:g}{rate}) diverged: joint {joints[k]} "
+            f"({symbols[joints[k] - 1]}) |q - q_ref| grew from {first[k]:.3g} to {last[k]:.3g} times the amplitude "
+            f"(at t = {t[at]:g} s)")
 
 
 # -- output -------------------------------------------------------------------------------------
@@ -570,7 +809,8 @@ def _groups(joints: Sequence[int], units: Sequence[str]) -> dict[str, list[int]]
 
 
 def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | None = None) -> Path:
-    """Figure of the co-simulated step against the continuous, c2d and sampled-data predictions.
+    """Figure of the co-simulated step against the continuous, c2d and sampled-data predictions
+    (the sampled-data loop at the controller's sample time and delay, where the run has them).
 
     One panel of q - q0 per position unit of the stepped joints (rad, m) with the co-simulated
     responses and the predictions; then co-simulated minus predicted, in % of each joint's
@@ -622,7 +862,7 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
                 if amplitude in drawn:
                     continue
                 ax.plot(c.time, c.predictions[model][:, column[j]], **styles.get(model, {}),
-                        label=MODEL_TEXT[model] if not drawn else None)
+                        label=c.model_text(model) if not drawn else None)
                 drawn.add(amplitude)
         for amplitude in {float(c.amplitudes[column[j]]) for j in joints}:
             ax.axhline(amplitude, color="grey", lw=0.6)
@@ -647,8 +887,9 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
             ax.plot(c.time, effort[:, j - 1], lw=1.0, label=f"tau{j} ({c.symbol(j)})")
         ax.set_ylabel(f"effort ({_display(unit)})")
         ax.legend(fontsize=7, ncol=min(4, len(joints)))
+    rate = "" if c.sample_time is None else f", controller every {c.sample_time * 1e3:g} ms, d = {c.delay_steps}"
     axes[0].set_title(f"{c.robot}: step {c.step_text()}\nkp {g['kp']:.4g}, kd {g['kd']:.4g}, "
-                      f"ki {g['ki']:.4g}; h = {c.h * 1e3:g} ms ({c.algorithm})", fontsize=10)
+                      f"ki {g['ki']:.4g}; h = {c.h * 1e3:g} ms{rate} ({c.algorithm})", fontsize=10)
     axes[-1].set_xlabel("t (s)")
     for ax in axes:
         ax.grid(alpha=0.3)

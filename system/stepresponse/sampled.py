@@ -145,7 +145,7 @@ def sampled_prediction(kp: float, kd: float, ki: float, sample_time: float, dela
 
 def predict_sampled(kp: float, kd: float, ki: float, t: np.ndarray, amplitude: float = 1.0,
                     sample_time: float | None = None, delay_steps: int = 0, damping: float = 0.0,
-                    h: float | None = None) -> np.ndarray:
+                    h: float | None = None, startup: str = "rest") -> np.ndarray:
     """Predicted y(t) = q(t) - q0 after a reference step, on the base-step grid of the co-simulation.
 
     The loop of :func:`sampled_prediction` gives the state at the controller's samples; between
@@ -168,6 +168,11 @@ def predict_sampled(kp: float, kd: float, ki: float, t: np.ndarray, amplitude: f
         beta (1/s), as in :func:`sampled_prediction`.
     h : float, optional
         Base (communication) step (s); default ``t[1] - t[0]``.
+    startup : {"rest", "first"}
+        What the plant receives before t_d (d > 0): "rest", u = 0, the effort computed before
+        the step (the notes above); "first", u = v_0, the effort of the first sample, which is
+        what the controller block outputs before its sample d (it has no earlier sample;
+        ``components/blocks/controller.py``). Equal for d = 0.
 
     Returns
     -------
@@ -176,6 +181,8 @@ def predict_sampled(kp: float, kd: float, ki: float, t: np.ndarray, amplitude: f
     """
     kp, kd, ki = check_gains(kp, kd, ki)
     d = _delay(delay_steps)
+    if startup not in ("rest", "first"):
+        raise ValueError(f"startup must be 'rest' or 'first', got {startup!r}")
     t = np.asarray(t, dtype=float)
     h = _positive("h", t[1] - t[0] if h is None else h, "s")
     sample_time = h if sample_time is None else sample_time
@@ -196,7 +203,10 @@ def predict_sampled(kp: float, kd: float, ki: float, t: np.ndarray, amplitude: f
         rows_d.append((gamma @ du)[:1])
     lifted = control.ss(loop.A, loop.B, np.vstack(rows_c), np.vstack(rows_d), dt=ts)
     samples = -(-len(t) // ratio)
-    y = control.step_response(lifted, T=ts * np.arange(samples), squeeze=False).outputs[:, 0, :]
+    x0 = np.zeros(loop.nstates)
+    if startup == "first" and d:
+        x0[-d:] = kp          # the delay line (the last d states) full of v_0 = kp r, r = 1
+    y = control.step_response(lifted, T=ts * np.arange(samples), X0=x0, squeeze=False).outputs[:, 0, :]
     return amplitude * np.asarray(y, dtype=float).T.reshape(-1)[:len(t)]
 
 

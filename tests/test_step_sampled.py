@@ -225,6 +225,7 @@ def test_friction_unknown_option_leaves_the_losses_to_the_plant(fmu_root, capsys
     (["--sample-time", "0.0025"], "--sample-time"),
     (["--sample-time", "0"], "--sample-time"),
     (["--sample-time", "nan"], "--sample-time"),
+    (["--sample-time", "0.5", "--stop-time", "0.2"], "--sample-time"),
     (["--delay-steps", "-1"], "--delay-steps"),
     (["--delay-steps", "1001"], "--delay-steps"),
     (["--delay-steps", "0.5"], "--delay-steps"),

@@ -330,6 +330,9 @@ def main(args) -> int:
         kp, kd, ki = _gains(args, robot, design)
         stop_time = _stop_time(args, design, len(setup.q0))
         sampled = _sampled(args)
+        if (args.sample_time or 0.0) > stop_time:
+            raise UsageError(f"--sample-time {args.sample_time:g}: longer than the run (--stop-time {stop_time:g} s): "
+                             "the controller would sample once")
         check_fmu_folder(step_system(args.fmus, kp, kd, ki, robot=robot, amplitude=setup.amplitudes,
                                      h=args.step_size, stop_time=stop_time, joint=setup.joints, q0=setup.q0,
                                      **sampled))

@@ -37,6 +37,7 @@ MODULE_MARKERS = {
     "test_newton_study.py": ("study",),
     "test_sampled_loop_study.py": ("study",),
     "test_ssp.py": ("interop",),
+    "test_step_sampled.py": ("study",),
     "test_stepresponse.py": ("study",),
     "test_sweep.py": ("slow", "study"),                  # dask clusters: 10 of its 22 tests take 2 to 30 s
     "test_sweep_axes.py": ("study",),

@@ -48,12 +48,13 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from fmpy.fmi2 import fmi2Real
 
 from robofmu.components.fmi.reporting import INTERRUPTION
 from robofmu.system.defaults import ALGORITHMS
 from robofmu.system.diagram import System
-from robofmu.system.exchange import (Failure, Fmi2Functions, Inputs, Ports, getters, output_port, setters,
-                                     stepper)
+from robofmu.system.exchange import (Failure, Fmi2Functions, Inputs, Ports, failed, getters, output_port,
+                                     setters, stepper)
 from robofmu.system.fmu import FMUInstance, FMUError, LogMessage
 from robofmu.system.interrupt import sigint_flag
 from robofmu.system.plan import (DiagramError, Link, Node, Plan, Times, available_memory, plan, step_count, times,
@@ -347,22 +348,28 @@ class Master:
         self.units = {column: units[column] for column in self.columns if units[column]}
         self.keep = np.array(keep, dtype=np.intp)
 
-    def _operations(self, algorithm: str, h: float):
-        """The exchanges and steps as flat lists of closures over preallocated buffers.
+    def _operations(self, algorithm: str, h: float, time):
+        """The exchanges and steps as flat lists of :data:`~robofmu.system.exchange.Call` tuples
+        over preallocated buffers.
 
         Gauss-Seidel: for each due block in evaluation order, set its inputs from blocks
         evaluated before it, then read its outputs; after the pass, set the due blocks' inputs
         that come from blocks evaluated later. Jacobi: read every due output, then set every due
         input. A block not due is left alone (its outputs held in the signal vectors).
 
+        Parameters
+        ----------
+        time : fmi2Real
+            The communication point (s) every doStep passes, set by the loop.
+
         Returns
         -------
-        first : list of callable
+        first : list of Call
             The exchange at the first point (Gauss-Seidel, every block due: a consistent start).
         schedule : callable
-            ``schedule(due)`` -> (exchange, steps) for the tuple of blocks due (in evaluation
-            order): ``op()`` each, and ``(op, size)`` pairs, ``op(t, size)`` one doStep of
-            ``size`` = the block's sample time (s).
+            ``schedule(due, stepped)`` -> (exchange, steps), lists of Call: the exchange of the
+            blocks ``due`` and the doSteps (of one sample time each) of the blocks ``stepped``
+            (tuples of names in evaluation order).
         """
         real_signals, boolean_signals = self.real_signals, self.boolean_signals
         early, reads, late, steps = {}, {}, {}, {}
@@ -371,18 +378,17 @@ class Master:
             reads[name] = getters(functions, ports, name)
             early[name] = setters(functions, ports.early, real_signals, boolean_signals, name)
             late[name] = setters(functions, ports.late, real_signals, boolean_signals, name)
-            steps[name] = stepper(functions, name)
-        ratios = self.plan.ratios
+            steps[name] = stepper(functions, name, time, self.plan.ratios[name] * h)
 
         def exchange(due, method):
             if method == "gauss-seidel":
-                return ([op for name in due for op in early[name] + reads[name]]
-                        + [op for name in due for op in late[name]])
-            return ([op for name in due for op in reads[name]]
-                    + [op for name in due for op in early[name] + late[name]])
+                return ([call for name in due for call in early[name] + reads[name]]
+                        + [call for name in due for call in late[name]])
+            return ([call for name in due for call in reads[name]]
+                    + [call for name in due for call in early[name] + late[name]])
 
-        def schedule(due):
-            return exchange(due, algorithm), [(steps[name], ratios[name] * h) for name in due]
+        def schedule(due, stepped):
+            return exchange(due, algorithm), [steps[name] for name in stepped]
 
         return exchange(tuple(self.order), "gauss-seidel"), schedule
 
@@ -390,42 +396,68 @@ class Master:
               interrupted: list | None = None) -> Result:
         interrupted = [False] if interrupted is None else interrupted
         real_signals, boolean_signals = self.real_signals, self.boolean_signals
-        n_real = len(real_signals)
+        n_real, n_boolean = len(real_signals), len(boolean_signals)
         ones = np.ones(n_real)              # signals . ones: nan and inf propagate, a sum at BLAS speed
-        row = np.zeros(n_real + len(boolean_signals))
+        row = np.zeros(n_real + n_boolean)
         record_all = np.array_equal(self.keep, np.arange(len(row)))
         recorded = np.empty((n_steps + 1, len(self.keep)))
         times_ = t0 + h * np.arange(n_steps + 1)
-        first, schedule = self._operations(algorithm, h)
+        if record_all:
+            # Recording every signal, the loop copies the Reals into their row of `recorded`
+            # (memoryviews: a copy without NumPy's indexing) and the Booleans into rows of their
+            # own, cast into `recorded` (exactly: 0 or 1) for the points kept when the run ends.
+            reals, booleans = memoryview(real_signals), memoryview(boolean_signals)
+            real_rows = memoryview(recorded.reshape(-1))
+            boolean_record = np.zeros((n_steps + 1, n_boolean), dtype=np.int32)
+            boolean_rows = memoryview(boolean_record.reshape(-1))
+            width = len(row)
+        time = fmi2Real()                   # the communication point of every doStep (s)
+        first, schedule = self._operations(algorithm, h, time)
         everyone = tuple(self.order)
-        exchange, steps = schedule(everyone)
-        # The blocks due at base step k (and stepped there: their step ends by the stop time).
+        exchange, steps = schedule(everyone, everyone)
+        # Multi-rate: which blocks are due at base step k (their inputs set, outputs read) and
+        # stepped there (their step ends by the stop time) repeats with the ratios' least common
+        # multiple, until the longest sample time reaches the stop time.
         ratios = [(name, self.plan.ratios[name]) for name in self.order]
         multirate = self.plan.multirate
-        plans: dict = {}
+        if multirate:
+            cycle = math.lcm(*(r for _, r in ratios))
+            regular = n_steps - max(r for _, r in ratios)    # every due block stepped up to here
+
+            def plan_at(k):
+                return schedule(tuple(name for name, r in ratios if k % r == 0),
+                                tuple(name for name, r in ratios if k % r == 0 and k + r <= n_steps))
+            phases = [plan_at(k) for k in range(min(cycle, n_steps + 1))]
         clock = self._clock
         every = max(1, n_steps // 20)
+        progress = self.progress
+        isfinite, dot = math.isfinite, real_signals.dot
         t, n_recorded = t0, 0
+
+        def record_booleans():        # into the points kept, before the result is made of them
+            if record_all and n_boolean:
+                recorded[:n_recorded, n_real:] = boolean_record[:n_recorded]
+
         wall = _time.perf_counter()
         try:
             for k in range(n_steps + 1):
-                t = clock[0] = times_[k]
+                t = clock[0] = t0 + h * k      # = times_[k] bit for bit: the same two IEEE operations
                 if multirate:
-                    due = tuple(name for name, r in ratios if k % r == 0)
-                    stepped = tuple(name for name, r in ratios if k % r == 0 and k + r <= n_steps)
-                    if (due, stepped) not in plans:
-                        plans[due, stepped] = schedule(due)[0], schedule(stepped)[1]
-                    exchange, steps = plans[due, stepped]
-                for op in (first if k == 0 else exchange):    # Jacobi, too, starts consistent
-                    op()
-                if not math.isfinite(real_signals.dot(ones)) and not np.isfinite(real_signals).all():
+                    exchange, steps = phases[k % cycle] if k <= regular else plan_at(k)
+                for function, arguments, block, call in (first if k == 0 else exchange):
+                    status = function(*arguments)      # Jacobi, too, starts consistent
+                    if status > 1:
+                        raise failed(block, status, call)
+                if not isfinite(dot(ones)) and not np.isfinite(real_signals).all():
                     index = int(np.flatnonzero(~np.isfinite(real_signals))[0])
                     bad = self.real_names[index]
                     raise Failure(bad.split(".")[0], f"output {bad} is not finite "
                                    f"({real_signals[index]}) at t = {t:.9g} s")
                 if record_all:
-                    recorded[k, :n_real] = real_signals
-                    recorded[k, n_real:] = boolean_signals
+                    start = k * width
+                    real_rows[start:start + n_real] = reals
+                    start = k * n_boolean
+                    boolean_rows[start:start + n_boolean] = booleans
                 else:
                     row[:n_real] = real_signals
                     row[n_real:] = boolean_signals
@@ -435,14 +467,19 @@ class Master:
                     raise Failure("", "interrupted", "SIGINT")
                 if k == n_steps:
                     break
-                for op, size in steps:
-                    op(t, size)
-                if self.progress is not None and (k + 1) % every == 0:
-                    self.progress((k + 1) / n_steps, t + h)
+                time.value = t
+                for function, arguments, block, call in steps:
+                    status = function(*arguments)
+                    if status > 1:
+                        raise failed(block, status, call)
+                if progress is not None and (k + 1) % every == 0:
+                    progress((k + 1) / n_steps, t + h)
         except KeyboardInterrupt:       # a callback's, or a signal no handler could note
+            record_booleans()
             kept = (times_, recorded, n_recorded, algorithm, h, csv_path)
             raise self._interruption(" (KeyboardInterrupt)", None, *kept) from None
         except Failure as exc:
+            record_booleans()
             kept = (times_, recorded, n_recorded, algorithm, h, csv_path)
             if exc.call == "SIGINT":
                 raise self._interruption("", None, *kept) from None
@@ -463,6 +500,7 @@ class Master:
                                              + (f" in {csv_path}" if csv_path else "") if n_recorded else ""),
                                   exc.block, float(t), result, message) from None
         info = {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall, "order": list(self.order)}
+        record_booleans()
         if multirate:
             info["sample_times"] = {name: r * h for name, r in ratios}
         result = self._result(times_, recorded, info)

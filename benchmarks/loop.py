@@ -50,6 +50,8 @@ from robofmu.system import options
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNNERS = ("robofmu", "in-process", "libcosim", "ecos", "container")
+#: The master's own overhead (issue 30): its time per step at most this times the in-process loop's.
+AIM_IN_PROCESS = 1.20
 
 
 def _peak_mb() -> float:
@@ -262,9 +264,10 @@ def main(argv=None) -> int:
               f"{'met' if per['robofmu'] <= per['libcosim'] else 'NOT met'} per step "
               f"({per['robofmu']:.0f} vs {per['libcosim']:.0f} us), "
               f"{'met' if walls['robofmu'] <= walls['libcosim'] else 'NOT met'} in wall time "
-              f"({walls['robofmu']:.2f} vs {walls['libcosim']:.2f} s); "
-              f"robofmu <= 2x in-process: {'met' if per['robofmu'] <= 2 * per['in-process'] else 'NOT met'} "
-              f"({per['robofmu'] / per['in-process']:.2f}x)")
+              f"({walls['robofmu']:.2f} vs {walls['libcosim']:.2f} s)")
+        overhead = per["robofmu"] / per["in-process"]
+        print(f"h = {h * 1e3:g} ms: robofmu master <= {AIM_IN_PROCESS:.2f}x in-process: "
+              f"{'met' if overhead <= AIM_IN_PROCESS else 'NOT met'} ({overhead:.2f}x)")
         speedup = per["libcosim"] / per["robofmu"]
         print(f"h = {h * 1e3:g} ms: robofmu >= 4x faster than libcosim per step: "
               f"{'met' if speedup >= 4 else 'NOT met'} ({speedup:.2f}x)")

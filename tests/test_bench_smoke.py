@@ -2,8 +2,9 @@
 (a script added there is covered: its expected table must be listed here), runs on a few steps
 (``--quick``, where a script takes it: every timing loop of the bench does) against freshly built
 FMUs (``--fmus``, where it takes them), exits 0, and prints its table with the rows that matter: the
-arms' cost ratio to chess-pd and the sweep's speed-up, each consistent with the numbers printed
-beside it (a ratio is the quotient of its row's columns, to the printed digits).
+arms' cost ratio to chess-pd, the sweep's speed-up and the multi-rate run's cost per plant step
+against single-rate, each consistent with the numbers printed beside it (a ratio is the quotient
+of its row's columns, to the printed digits).
 """
 from __future__ import annotations
 
@@ -37,7 +38,10 @@ def bench_commands() -> list[list[str]]:
 TABLES = {
     "run.py": [r"^robot\s+block\s+direct \(us\)\s+through FMI \(us\)\s+ratio$", r"^chess\s+plant\s"],
     "split.py": [r"^\| all \| [-\d.]+ \| [-\d.]+ \| [-\d.]+ \| [\d.]+ \| \d+ \|$"],
-    "loop.py": [r"^robofmu\s+5\s", r"^in-process\s+5\s", r"in-process vs robofmu master"],
+    "loop.py": [r"^robofmu\s+5\s", r"^in-process\s+5\s", r"in-process vs robofmu master",
+                r"robofmu master <= 1\.20x in-process: (met|NOT met) \(\d+\.\d\dx\)"],
+    "multirate.py": [r"^\| chess-pd \| [\d.]+ \| [\d.]+ \| \d+\.\d\d \|", r"^\| ur5-pose \| [\d.]+ \| [\d.]+ \| \d+\.\d\d \|",
+                     r"multi-rate cheaper per plant step than single-rate: (met|NOT met) on chess-pd"],
     "ik.py": [r"^chess\s+pitch_elbow\s+[\d.]+\s+0\.00\s+1\.00$", r"^panda\s+damped_least_squares\s"],
     "arms.py": [r"^\| chess-pd \| \d+ \| 1\.00 \|", r"^\| ur5-pose \| \d+ \| \d+\.\d\d \|",
                 r"^\| panda-pose \| \d+ \| \d+\.\d\d \|"],
@@ -75,7 +79,20 @@ def check_sweep(out: str) -> None:
     assert (two - 0.05) / (one + 0.05) - 0.005 <= speedup <= (two + 0.05) / (one - 0.05) + 0.005, (one, two, speedup)
 
 
-CHECKS = {"arms.py": check_arms, "sweep.py": check_sweep}
+def check_multirate(out: str) -> None:
+    """Each ratio is the multi-rate µs per plant step over the single-rate (both printed to 0.1 µs),
+    and the verdict follows it."""
+    for name, one, many, ratio in re.findall(r"^\| ([\w-]+) \| ([\d.]+) \| ([\d.]+) \| (\d+\.\d\d) \|", out, re.M):
+        one, many, ratio = float(one), float(many), float(ratio)
+        assert ratio > 0 and math.isfinite(ratio)
+        assert (many - 0.05) / (one + 0.05) - 0.005 <= ratio <= (many + 0.05) / (one - 0.05) + 0.005, (name, one, many)
+        verdict = re.search(rf"(met|NOT met) on {name} \((\d+\.\d\d)x\)", out)
+        assert verdict and float(verdict.group(2)) == ratio, name
+        if abs(many - one) > 0.1:             # the verdict compares the unrounded times
+            assert (verdict.group(1) == "met") == (many < one), (name, one, many)
+
+
+CHECKS = {"arms.py": check_arms, "sweep.py": check_sweep, "multirate.py": check_multirate}
 
 
 def offered(command: list[str]) -> list[str]:

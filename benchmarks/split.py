@@ -118,18 +118,23 @@ def main(argv=None) -> int:
         c_bools = (ctypes.c_int * max(1, len(vbool)))()
         fmi_clock = [0]
 
-        n_in, n_out, n_bool = (ctypes.c_size_t(len(v)) for v in (vin, vout, vbool))
-        t_arg, h_arg, true = ctypes.c_double(), ctypes.c_double(H), ctypes.c_int(1)
+        # the arguments of their C types converted once into ctypes parameters, as the master
+        # passes them (Fmi2Functions); the time an fmi2Real set per step
+        c = functions.argument
+        set_in = (c, ctypes.byref(c_in), ctypes.c_size_t.from_param(len(vin)), ctypes.byref(c_values))
+        get_out = (c, ctypes.byref(c_out), ctypes.c_size_t.from_param(len(vout)), ctypes.byref(c_read))
+        get_bool = (c, ctypes.byref(c_bool), ctypes.c_size_t.from_param(len(vbool)), ctypes.byref(c_bools))
+        t_arg = ctypes.c_double()
+        step = (c, t_arg, ctypes.c_double.from_param(H), ctypes.c_int.from_param(1))
 
-        def through_fmi(k, f=functions, c=functions.component, clock=fmi_clock):
-            # arguments of their C types, as the master passes them (Fmi2Functions)
+        def through_fmi(k, f=functions, clock=fmi_clock):
             if vin:
-                f.set_real(c, c_in, n_in, c_values)
-            f.get_real(c, c_out, n_out, c_read)
+                f.set_real(*set_in)
+            f.get_real(*get_out)
             if vbool:
-                f.get_boolean(c, c_bool, n_bool, c_bools)
+                f.get_boolean(*get_bool)
             t_arg.value = clock[0] * H
-            if f.do_step(c, t_arg, h_arg, true) > 1:
+            if f.do_step(*step) > 1:
                 raise RuntimeError(f"{name}: fmi2DoStep failed: {fmu.messages[-1:]}")
             clock[0] += 1
 

@@ -124,3 +124,28 @@ def test_a_sample_time_off_the_grid_is_refused_naming_the_axis(fmu_root, tmp_pat
     out = tmp_path / "out"
     assert_refused(capfd, [*args, "--fmus", fmu_root, "--out", out], *names)
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_workers_started_after_a_fmu_bundle_went_on_sys_path_know_the_robots(fmu_root, tmp_path):
+    """pythonfmu puts a FMU's resources (a copy of robofmu/components without the robots) on this
+    process's sys.path, and multiprocessing hands sys.path to the workers it starts: they imported
+    robofmu from the copy and knew no robot (every row 'unknown robot', seen in the full suite)."""
+    import shutil
+    import sys
+    from pathlib import Path
+
+    import robofmu.components
+    from robofmu.components.robots import available
+
+    bundle = tmp_path / "resources"
+    shutil.copytree(Path(robofmu.components.__file__).parent, bundle / "robofmu" / "components",
+                    ignore=shutil.ignore_patterns(*available(), "__pycache__"))
+    (bundle / "robofmu" / "__init__.py").write_text("")
+    sys.path.insert(0, str(bundle))
+    try:
+        design = Design(EXPERIMENT, [parse_axis("controller.sample_time=0.001,0.004")], stop_time=STOP)
+        run = run_sweep(design, tmp_path / "sweep", fmu_dir=fmu_root, workers=1, progress=False)
+    finally:
+        sys.path.remove(str(bundle))
+    assert [r["status"] for r in run.rows] == ["ok"] * 2, [r["message"] for r in run.rows]

@@ -18,6 +18,7 @@ import os
 import sys
 import time
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Callable
 
 from robofmu.system.interrupt import sigint_flag
@@ -102,15 +103,37 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, tim
              "distributed.admin.system-monitor.gil.enabled": False,
              "distributed.worker.memory.monitor-interval": "1s",
              "distributed.scheduler.work-stealing": False}          # equal runs: the queue balances them
-    with dask.config.set(local):
-        cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
-    client = Client(cluster)
+    with _without_fmu_bundles():          # the workers (and any restarted one) inherit sys.path
+        with dask.config.set(local):
+            cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+
+
+@contextmanager
+def _without_fmu_bundles():
+    """``sys.path`` without the folders of FMUs instantiated in this process, while it lasts.
+
+    pythonfmu puts a FMU's resources folder on ``sys.path``; that folder holds a copy of
+    ``robofmu/components`` without the package's robots. A process that multiprocessing starts
+    gets its parent's ``sys.path`` and imports ``robofmu`` anew, from the first folder that has it:
+    a worker started after a FMU ran in this process would read robots from the FMU's copy and
+    know none ("unknown robot"). This process has imported its own robofmu already."""
+    import robofmu.components
+
+    own = Path(robofmu.components.__file__).resolve().parent
+    saved = list(sys.path)
+    sys.path[:] = [p for p in saved if not ((Path(p or ".") / "robofmu" / "components").is_dir()
+                                             and (Path(p or ".") / "robofmu" / "components").resolve() != own)]
     try:
-        yield client
+        yield
     finally:
-        client.close()
-        cluster.close()
+        sys.path[:] = saved
 
 
 class SweepProgress:

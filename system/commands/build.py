@@ -107,9 +107,10 @@ def main(args) -> int:
     except UsageError as exc:
         say("build", exc)
         return 2
+    findings = {}                        # what each check found, printed when its robot is built
     for description in descriptions:
         try:
-            checked(description, log=lambda *_: None)
+            checked(description, log=findings.setdefault(description.name, []).append)
         except ValueError as exc:        # the user's files: TOML, URDF, SRDF, CSV, the reference
             say("build", located(description, exc))
             return 2
@@ -120,7 +121,9 @@ def main(args) -> int:
             print(line)
     for robot, description in zip(args.robots or known, descriptions):
         try:
-            paths = build(robot, args.out)
+            for line in findings[description.name]:
+                print(line)
+            paths = build(robot, args.out, check=False)      # checked above, once
         except (ValueError, OSError) as exc:
             say("build", f"{description.name}: {one_line(exc)}")
             return 1

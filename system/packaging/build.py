@@ -107,7 +107,7 @@ def stage_code(package_dir: Path, target: Path) -> None:
 
 
 def build(robot: str | Path, out_dir: str | Path = "fmus", blocks: list[str] | None = None,
-          log=print) -> list[Path]:
+          log=print, check: bool = True) -> list[Path]:
     """Build ``out_dir/<robot name>/<block>.fmu`` for each block; returns the paths.
 
     Each FMU is made whole in a temporary folder, then replaces the earlier one atomically
@@ -126,6 +126,9 @@ def build(robot: str | Path, out_dir: str | Path = "fmus", blocks: list[str] | N
         ``trajectory_<name>`` per named profile); default all.
     log : callable
         Progress messages (one line per FMU).
+    check : bool
+        Run :func:`checked` first (default); ``robofmu build`` checks every robot before building
+        any and passes False.
 
     Raises
     ------
@@ -139,7 +142,8 @@ def build(robot: str | Path, out_dir: str | Path = "fmus", blocks: list[str] | N
     description = check_name(load_description(robot))
     name = description.name
     blocks = list(description.fmu_blocks) if blocks is None else blocks
-    checked(description, log)
+    if check:                                       # False: the caller ran :func:`checked` itself
+        checked(description, log)
     version = robofmu_version()
     export_library = fmi_export.library(log=log)     # first: a missing compiler fails before any FMU
     dest = Path(out_dir) / name

@@ -828,6 +828,24 @@ def test_gravity_scales_with_set_gravity(robot):
         rm.set_gravity(g0)
 
 
+def test_gravity_jacobian_is_the_potentials_hessian(robot):
+    """dg/dq (what the step analysis linearizes gravity with) is the Hessian of V: symmetric,
+    v^T G v = d^2 V/ds^2 along random directions, and each column the derivative of g(q)
+    (fourth-order central differences, step 1e-4 / 1e-3: truncation ~1e-12 / 1e-10 of the scale)."""
+    rm = load_model(robot)
+    rng = np.random.default_rng(11)
+    for q in configurations(rm, 6, seed=13):
+        G = rm.gravity_jacobian(q)
+        scale = max(1.0, float(np.abs(G).max()))
+        assert G.shape == (rm.n, rm.n)
+        np.testing.assert_allclose(G, G.T, rtol=0, atol=1e-9 * scale)
+        for v in rng.normal(size=(3, rm.n)):
+            v /= np.linalg.norm(v)
+            assert v @ G @ v == pytest.approx(d2(lambda p: rm.potential_energy(p), q, v, 1e-3), abs=1e-6 * scale)
+        columns = np.column_stack([d1(rm.gravity_torque, q, e, 1e-4) for e in np.eye(rm.n)])
+        np.testing.assert_allclose(G, columns, rtol=0, atol=1e-7 * scale)
+
+
 def test_energy_is_conserved_without_torque(robot):
     """Free motion under gravity (DOP853, tolerances 1e-12) for 1 s: T + V within 1e-9 of its
     start, relative to max(|E0|, T0); the robot really moves (was in test_3rrp_kinematics)."""

@@ -29,7 +29,7 @@ def test_package_reexports_every_public_name():
         assert getattr(sr, name) is getattr(module, name), name
     for name in ("design_gains", "compare", "cosimulate_step", "plot_comparison", "default_amplitudes",
                  "step_metrics", "predict", "error_dynamics", "discrete_prediction", "write_csv",
-                 "predict_sampled", "sampled_prediction", "largest_stable_kp", "spectral_radius",
+                 "predict_sampled", "predict_coupled", "sampled_prediction", "largest_stable_kp", "spectral_radius",
                  "friction_steady_state_error", "friction_creep_time", "FrictionMiss"):
         assert name in sr.__all__
     # the command is robofmu.system.commands.step: the package exports no command-line things

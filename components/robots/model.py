@@ -143,6 +143,17 @@ class RobotModel(ABC):
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """g(q), shape (n,)."""
 
+    def gravity_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """dg/dq at ``q``, shape (n, n) (N.m/rad, N/m, ...): the stiffness gravity adds about ``q``.
+
+        Central differences of :meth:`gravity_torque` (step 1e-6 in each coordinate, error about
+        1e-10 of g''); a model with the derivative in closed form overrides this."""
+        q = np.asarray(q, dtype=float)
+        step = 1e-6
+        columns = [(self.gravity_torque(q + step * e) - self.gravity_torque(q - step * e)) / (2.0 * step)
+                   for e in np.eye(q.size)]
+        return np.column_stack(columns)
+
     @abstractmethod
     def nonlinear_effects(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """N(q, qd) = C(q, qd) qd + g(q), shape (n,)."""

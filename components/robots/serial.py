@@ -471,6 +471,11 @@ class SerialRobot(RobotModel):
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         return pin.computeGeneralizedGravity(self.model, self.data, q).copy()
 
+    def gravity_jacobian(self, q: np.ndarray) -> np.ndarray:
+        if self._mimic:                          # Pinocchio's derivatives take no mimic joint
+            return super().gravity_jacobian(q)
+        return pin.computeGeneralizedGravityDerivatives(self.model, self.data, q).copy()
+
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         if self._mimic:                          # M qdd = tau - N, M from CRBA (ABA takes no mimic joint)
             return np.linalg.solve(self.mass_matrix(q), tau - self.nonlinear_effects(q, qd))

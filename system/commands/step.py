@@ -22,8 +22,9 @@ The loop as it runs on a robot: ``--sample-time TS`` (a whole multiple of ``--st
 the controller sample every TS, ``--delay-steps D`` outputs its effort D samples late, ``--set
 BLOCK.PARAM=VALUE`` changes a block parameter (``plant.friction[2]=0.5``: joint losses the
 controller does not know) and ``--friction-unknown`` sets ``controller.loss_compensation`` to 0.
-With any of them the ``sampled`` model is the loop at TS with D
-(:func:`~robofmu.system.stepresponse.sampled.predict_sampled`), and the report adds the largest
+With any of them the ``sampled`` model is the loop at TS with D, the joints coupled by gravity and
+damping through the held effort (:func:`~robofmu.system.stepresponse.sampled.predict_coupled`,
+linearized at the step's middle), and the report adds the largest
 stable kp at TS and D (kd held) and, per stepped joint with Coulomb friction unknown to the
 controller, the stop short predicted, measured and missed. Without them the command is as before.
 A response whose error grows is reported ``UNSTABLE`` naming the block, the joint and the time

@@ -12,7 +12,8 @@ response of each joint, revolute (rad) or prismatic (m), is predicted by linear 
     :func:`predict`).
 :mod:`.sampled`
     The loop with the controller at its own sample time and a computation delay, python-control's
-    prediction of it (:func:`sampled_prediction`, :func:`predict_sampled`), its kp stability limit
+    prediction of it (:func:`sampled_prediction`, :func:`predict_sampled`; :func:`predict_coupled` with
+    the joints coupled by gravity and damping through the held effort), its kp stability limit
     (:func:`largest_stable_kp`, :func:`spectral_radius`) and what Coulomb friction unknown to the
     controller costs (:func:`friction_steady_state_error`, :func:`friction_creep_time`).
 :mod:`.metrics`
@@ -39,15 +40,15 @@ from robofmu.system.stepresponse.experiment import (CONTROLLER, DEFAULT_AMPLITUD
 from robofmu.system.stepresponse.linear import (MODEL_TEXT, MODELS, discrete_prediction, error_dynamics, predict,
                                                 zoh_prediction)
 from robofmu.system.stepresponse.sampled import (friction_creep_time, friction_steady_state_error,
-                                                 largest_stable_kp, predict_sampled, sampled_prediction,
-                                                 spectral_radius)
+                                                 largest_stable_kp, predict_coupled, predict_sampled,
+                                                 sampled_prediction, spectral_radius)
 from robofmu.system.stepresponse.metrics import (StepMetrics, damping_from_overshoot, second_order_settling_time,
                                                  step_metrics)
 
 __all__ = [
     "MODELS", "MODEL_TEXT", "error_dynamics", "zoh_prediction", "discrete_prediction", "predict",
     "StepMetrics", "step_metrics", "damping_from_overshoot", "second_order_settling_time",
-    "sampled_prediction", "predict_sampled", "spectral_radius", "largest_stable_kp",
+    "sampled_prediction", "predict_sampled", "predict_coupled", "spectral_radius", "largest_stable_kp",
     "friction_steady_state_error", "friction_creep_time",
     "GainDesign", "design_gains",
     "CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "FrictionMiss", "steppable_robots",

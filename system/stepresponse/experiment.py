@@ -23,8 +23,10 @@ The loop as it runs on a robot (any of ``sample_time``, ``delay_steps``, ``param
 steps h; the plant still steps at h) and outputs its effort ``delay_steps`` = d samples late, and
 block parameters may make the plant's joint losses differ from what the controller compensates
 (``plant.friction[j]``, ``controller.loss_compensation`` = 0, ...). :func:`compare` then predicts
-with :func:`~.sampled.predict_sampled` (the ``sampled`` model, at Ts with d and the unknown
-viscous damping, the controller's start-up: the effort of its first sample until sample d),
+with :func:`~.sampled.predict_coupled` (the ``sampled`` model, at Ts with d, the controller's
+start-up (the effort of its first sample until sample d), and the loop linearized at the step's
+middle: gravity's stiffness and the viscous damping, which couple the joints through the held,
+delayed effort),
 gives the kp stability limit (:func:`~.sampled.largest_stable_kp`, kd held) and, for Coulomb
 friction the controller does not know, the stop short predicted, measured and missed
 (:class:`FrictionMiss`). A response whose error grows is reported as unstable by name, with
@@ -48,7 +50,7 @@ from robofmu.system.master import Master, Result
 from robofmu.system.stepresponse.linear import MODEL_TEXT, MODELS, check_step, predict
 from robofmu.system.stepresponse.metrics import StepMetrics, step_metrics
 from robofmu.system.stepresponse.sampled import (friction_creep_time, friction_steady_state_error,
-                                                 largest_stable_kp, predict_sampled, spectral_radius)
+                                                 largest_stable_kp, predict_coupled, spectral_radius)
 
 __all__ = ["CONTROLLER", "PLANT", "DEFAULT_AMPLITUDE", "StepSetup", "Comparison", "FrictionMiss",
            "steppable_robots", "default_amplitudes", "step_setup", "step_system", "cosimulate_step", "compare",
@@ -324,11 +326,14 @@ def _vector(values: dict, base: str, n: int) -> np.ndarray:
     return np.array([float(values[name]) for name in names]) if len(names) == n else np.zeros(n)
 
 
-def _unknown_losses(system: System, description: RobotDescription, q_ref: np.ndarray) -> dict:
+def _unknown_losses(system: System, description: RobotDescription, q0: np.ndarray, q_ref: np.ndarray) -> dict:
     """Per joint (lists, n): the plant's damping and Coulomb friction the controller does not add
     (the plant's minus ``loss_compensation`` times the controller's own), the plant's friction
     velocity scale, and the inertia m = 1 / (M^-1)_jj (kg.m^2 or kg) of the plant's model (its
-    armature included) at the held reference."""
+    armature included) at the held reference; and ``linearization``, the coupled loop's matrices
+    of :func:`~.sampled.predict_coupled` (lists, n x n) at the step's middle q* = (q0 + q_ref) / 2,
+    where a tangent's error over the step is smallest: ``stiffness`` M^-1 dg/dq, ``damping``
+    M^-1 D (the plant's) and ``compensation`` M^-1 D_c (what the controller adds)."""
     n = q_ref.size
     plant, controller = _parameter_values(system, PLANT), _parameter_values(system, CONTROLLER)
     known = float(controller.get("loss_compensation", 1.0))
@@ -336,10 +341,17 @@ def _unknown_losses(system: System, description: RobotDescription, q_ref: np.nda
     if callable(getattr(model, "set_armature", None)) and expand(plant, "armature"):
         model.set_armature(_vector(plant, "armature", n))
     inertia = 1.0 / np.diag(np.linalg.inv(model.mass_matrix(q_ref)))
-    return {"unknown_damping": (_vector(plant, "damping", n) - known * _vector(controller, "damping", n)).tolist(),
+    damping, compensated = _vector(plant, "damping", n), known * _vector(controller, "damping", n)
+    middle = (q0 + q_ref) / 2.0
+    mass = model.mass_matrix(middle)
+    return {"unknown_damping": (damping - compensated).tolist(),
             "unknown_friction": (_vector(plant, "friction", n) - known * _vector(controller, "friction", n)).tolist(),
             "friction_velocity": _vector(plant, "friction_velocity", n).tolist(),
-            "inertia": inertia.tolist()}
+            "inertia": inertia.tolist(),
+            "linearization": {"q": middle.tolist(),
+                              "stiffness": np.linalg.solve(mass, model.gravity_jacobian(middle)).tolist(),
+                              "damping": np.linalg.solve(mass, np.diag(damping)).tolist(),
+                              "compensation": np.linalg.solve(mass, np.diag(compensated)).tolist()}}
 
 
 def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, *, robot: Robot,
@@ -401,7 +413,7 @@ def cosimulate_step(fmu_dir: str | Path, kp: float, kd: float, ki: float = 0.0, 
     if sample_time is not None or delay_steps is not None or parameters:
         sampled = dict(sample_time=h if sample_time is None else float(sample_time),
                        delay_steps=0 if delay_steps is None else int(delay_steps),
-                       **_unknown_losses(system, description, setup.q_ref))
+                       **_unknown_losses(system, description, setup.q0, setup.q_ref))
     result = master.run(float(stop_time), h, algorithm)
     result.info.update(robot=description.name, robot_file=str(description.path), kp=float(kp), kd=float(kd),
                        ki=float(ki), h=h,
@@ -540,7 +552,7 @@ class Comparison:
         """One line describing ``model`` (:data:`~.linear.MODEL_TEXT`; ``sampled`` at Ts with d)."""
         if model == "sampled" and self.sample_time is not None:
             return (f"sampled-data loop, controller every {self.sample_time * 1e3:g} ms, "
-                    f"{self.delay_steps} sample{'s' * (self.delay_steps != 1)} late (predict_sampled)")
+                    f"{self.delay_steps} sample{'s' * (self.delay_steps != 1)} late (predict_coupled)")
         return MODEL_TEXT[model]
 
     def unit(self, joint: int) -> str:
@@ -655,8 +667,8 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
         and the metrics of both (steady state taken as the reference q0 + amplitude, which a
         perfect model reaches; the record may end before the PID's slow integral mode has).
         For a run with ``sample_time`` in its ``info`` (see :func:`cosimulate_step`) the
-        ``sampled`` model is :func:`~.sampled.predict_sampled` at Ts with d, each joint's unknown
-        damping b / m and the controller's start-up (``startup="first"``; the model's metrics
+        ``sampled`` model is :func:`~.sampled.predict_coupled` at Ts with d, the run's
+        ``linearization`` and the controller's start-up (``startup="first"``; the model's metrics
         are those of the first stepped joint's), with the stability limit and the friction rows.
     """
     info = result.info
@@ -676,9 +688,13 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
     unit_responses, predictions, deviation = {}, {}, {}
     for model in models:
         if model == "sampled" and ts is not None:
-            columns = {b: predict_sampled(kp, kd, ki, t - t[0], 1.0, ts, d, b, h=h, startup="first") for b in set(beta)}
-            unit_responses[model] = columns[beta[0]]
-            predictions[model] = np.column_stack([columns[b] for b in beta]) * amplitudes[None, :]
+            step = np.zeros(q0.size)
+            step[stepped] = amplitudes
+            linearization = info["linearization"]
+            every = predict_coupled(kp, kd, ki, t - t[0], step, sample_time=ts, delay_steps=d, h=h, startup="first",
+                                    **{key: linearization[key] for key in ("stiffness", "damping", "compensation")})
+            predictions[model] = every[:, stepped]
+            unit_responses[model] = predictions[model][:, 0] / amplitudes[0]
         else:
             unit_responses[model] = predict(kp, kd, ki, t - t[0], 1.0, model, h)
             predictions[model] = unit_responses[model][:, None] * amplitudes[None, :]

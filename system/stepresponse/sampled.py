@@ -35,6 +35,13 @@ for d = 1, kp < (2 q - 3 + sqrt(9 - 8 q)) / T^2 with q = kd T, about a third of 
 for small q). :func:`largest_stable_kp` finds the limit for any d, ki and beta from
 python-control's discrete poles.
 
+Joints coupled through the held effort
+    The computed torque cancels the arm's gravity and the damping it knows only at its samples:
+    over the hold and the delay they act on the plant while the effort carries their values at
+    t_{k-d}, across joints (a slide's weight on the joint that lifts it).
+    :func:`predict_coupled` is the loop above for n joints at once with those terms linearized
+    (stiffness K = M^-1 dg/dq, damping B = M^-1 D, compensation B_c = M^-1 D_c); with K = B_c = 0
+    and B diagonal it is n copies of this one.
 Friction the controller does not know
     Viscous b: the ``damping`` above, beta = b / m. Coulomb tau_c: at rest a PD balances it with
     its proportional term, m kp e = tau_c, so the joint stops short of the reference by
@@ -60,7 +67,7 @@ from scipy.optimize import brentq
 
 from robofmu.components.control import check_gains
 
-__all__ = ["sampled_prediction", "predict_sampled", "spectral_radius", "largest_stable_kp",
+__all__ = ["sampled_prediction", "predict_sampled", "predict_coupled", "spectral_radius", "largest_stable_kp",
            "friction_steady_state_error", "friction_creep_time"]
 
 
@@ -81,30 +88,50 @@ def _delay(delay_steps) -> int:
     return d
 
 
-def _plant(damping: float) -> control.StateSpace:
-    """y'' = u - damping y' with outputs (y, y')."""
-    return control.ss([[0.0, 1.0], [0.0, -damping]], [[0.0], [1.0]], np.eye(2), np.zeros((2, 1)),
-                      inputs="u", outputs=["y", "yd"], name="plant")
+def _signals(base: str, n: int) -> list[str]:
+    """Signal names of a vector of n: ``base`` itself for one joint, else ``base[0]`` ... ``base[n-1]``."""
+    return [base] if n == 1 else [f"{base}[{i}]" for i in range(n)]
 
 
-def _closed_loop(plant: control.StateSpace, kp: float, kd: float, ki: float, d: int) -> control.StateSpace:
-    """The loop of the discretized ``plant`` (dt = Ts), input r, outputs (y, y', u applied).
+def _plant(damping, stiffness=None) -> control.StateSpace:
+    """y'' = u - stiffness y - damping y' (n joints; scalars for one) with outputs (y, y')."""
+    damping = np.atleast_2d(np.asarray(damping, dtype=float))
+    n = damping.shape[0]
+    stiffness = np.zeros((n, n)) if stiffness is None else np.atleast_2d(np.asarray(stiffness, dtype=float))
+    zero, one = np.zeros((n, n)), np.eye(n)
+    return control.ss(np.block([[zero, one], [-stiffness, -damping]]), np.vstack([zero, one]), np.eye(2 * n),
+                      np.zeros((2 * n, n)), inputs=_signals("u", n), outputs=_signals("y", n) + _signals("yd", n),
+                      name="plant")
 
-    States: (y, y'), then z if ki > 0, then the delay line (newest effort first)."""
-    ts = plant.dt
-    ctrl_out = "v" if d else "u"
+
+def _closed_loop(plant: control.StateSpace, kp: float, kd: float, ki: float, d: int,
+                 stiffness=None, compensation=None) -> control.StateSpace:
+    """The loop of the discretized ``plant`` (dt = Ts, n joints), inputs r, outputs (y, y', u applied).
+
+    The controller's effort per unit inertia is w = kp (r - y) - kd y' + ki z + stiffness y +
+    compensation y' (the last two: the model terms it computes from its samples, zero for one
+    decoupled joint). States: (y, y'), then z if ki > 0, then the delay line (newest effort first)."""
+    ts, n = plant.dt, plant.ninputs
+    stiffness = np.zeros((n, n)) if stiffness is None else np.atleast_2d(np.asarray(stiffness, dtype=float))
+    compensation = np.zeros((n, n)) if compensation is None else np.atleast_2d(np.asarray(compensation, dtype=float))
+    one, zero = np.eye(n), np.zeros((n, n))
+    inputs = _signals("r", n) + _signals("y", n) + _signals("yd", n)
+    ctrl_out = _signals("v" if d else "u", n)
+    feedthrough = np.hstack([kp * one, stiffness - kp * one, compensation - kd * one])
     if ki == 0.0:
-        ctrl = control.ss(np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((1, 0)), [[kp, -kp, -kd]], dt=ts,
-                          inputs=["r", "y", "yd"], outputs=ctrl_out, name="ctrl")
+        ctrl = control.ss(np.zeros((0, 0)), np.zeros((0, 3 * n)), np.zeros((n, 0)), feedthrough, dt=ts,
+                          inputs=inputs, outputs=ctrl_out, name="ctrl")
     else:
-        ctrl = control.ss([[1.0]], [[ts, -ts, 0.0]], [[ki]], [[kp, -kp, -kd]], dt=ts,
-                          inputs=["r", "y", "yd"], outputs=ctrl_out, name="ctrl")
+        ctrl = control.ss(one, np.hstack([ts * one, -ts * one, zero]), ki * one, feedthrough, dt=ts,
+                          inputs=inputs, outputs=ctrl_out, name="ctrl")
     parts = [plant, ctrl]
     if d:
-        parts.append(control.ss(np.eye(d, k=-1), np.eye(d, 1), np.eye(1, d, k=d - 1), np.zeros((1, 1)), dt=ts,
-                                inputs="v", outputs="u", name="delay"))
-    return control.interconnect(parts, inplist="r", outlist=["y", "yd", "u"], inputs="r",
-                                outputs=["y", "yd", "u"])
+        parts.append(control.ss(np.kron(np.eye(d, k=-1), one), np.kron(np.eye(d, 1), one),
+                                np.kron(np.eye(1, d, k=d - 1), one), zero, dt=ts,
+                                inputs=_signals("v", n), outputs=_signals("u", n), name="delay"))
+    outputs = _signals("y", n) + _signals("yd", n) + _signals("u", n)
+    return control.interconnect(parts, inplist=_signals("r", n), outlist=outputs, inputs=_signals("r", n),
+                                outputs=outputs)
 
 
 def _discrete_plant(sample_time, damping) -> tuple[control.StateSpace, control.StateSpace, float, float]:
@@ -179,35 +206,94 @@ def predict_sampled(kp: float, kd: float, ki: float, t: np.ndarray, amplitude: f
     numpy.ndarray, shape (n,)
         y in the unit of ``amplitude``.
     """
+    response = predict_coupled(kp, kd, ki, t, [amplitude], sample_time=sample_time, delay_steps=delay_steps,
+                               damping=[[_positive("damping", damping, "1/s", zero=True)]], h=h, startup=startup)
+    return response[:, 0]
+
+
+def predict_coupled(kp: float, kd: float, ki: float, t: np.ndarray, amplitudes, *, sample_time: float | None = None,
+                    delay_steps: int = 0, stiffness=None, damping=None, compensation=None, h: float | None = None,
+                    startup: str = "rest") -> np.ndarray:
+    """Predicted y(t) = q(t) - q0 of every joint after a step of the reference vector, the joints
+    coupled by the model terms the controller computes from its (held, delayed) samples.
+
+    The law tau = M(q_k) v_k + g(q_k) + D_c q'_k cancels the plant's M, g and damping only at the
+    sample t_k; in between, and over the delay, the plant feels g(q(t)) while the effort holds
+    g(q_k). Linearized about q* (M, g and D evaluated there, y = q - q0 small):
+
+        y'' = u - K y - B y',   u_k = v_{k-d} + K y_{k-d} + B_c y'_{k-d}
+
+    with K = M^-1 dg/dq (``stiffness``), B = M^-1 D (``damping``, the plant's viscous friction) and
+    B_c = M^-1 D_c (``compensation``, the part the controller adds), each (n, n) in 1/s^2 or 1/s.
+    With zero delay and continuous sampling K and B_c cancel; sampled and delayed they couple the
+    joints in proportion to the effort's mean lag (d + 1/2) Ts. With K = B_c = 0 and B diagonal
+    each column is :func:`predict_sampled` of that joint. What stays out is second order in the
+    amplitude: M(q) and dg/dq varying over the step, and the Coriolis terms.
+
+    Parameters
+    ----------
+    kp, kd, ki : float
+        Gains (1/s^2, 1/s, 1/s^3).
+    t : array_like, shape (m,)
+        Times (s) from the step: ``t[k] = t[0] + k h``.
+    amplitudes : array_like, shape (n,)
+        The step of each joint's reference (joint units: rad or m); 0 for a joint held.
+    sample_time : float, optional
+        Controller sample time Ts (s), an integer multiple N of ``h``; default ``h``.
+    delay_steps : int
+        d, in controller samples.
+    stiffness, damping, compensation : array_like, shape (n, n), optional
+        K (1/s^2), B and B_c (1/s) above; default zeros.
+    h : float, optional
+        Base (communication) step (s); default ``t[1] - t[0]``.
+    startup : {"rest", "first"}
+        As in :func:`predict_sampled`: before t_d the plant receives u = 0 ("rest") or the first
+        sample's effort u = kp r ("first", what the controller block does).
+
+    Returns
+    -------
+    numpy.ndarray, shape (m, n)
+        y of each joint, in the joints' units.
+    """
     kp, kd, ki = check_gains(kp, kd, ki)
     d = _delay(delay_steps)
     if startup not in ("rest", "first"):
         raise ValueError(f"startup must be 'rest' or 'first', got {startup!r}")
+    amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
+    n = amplitudes.size
+    matrices = {}
+    for name, value in (("stiffness", stiffness), ("damping", damping), ("compensation", compensation)):
+        value = np.zeros((n, n)) if value is None else np.asarray(value, dtype=float)
+        if value.shape != (n, n) or not np.all(np.isfinite(value)):
+            raise ValueError(f"{name} must be a finite ({n}, {n}) matrix, one row per joint stepped, got shape {value.shape}")
+        matrices[name] = value
     t = np.asarray(t, dtype=float)
     h = _positive("h", t[1] - t[0] if h is None else h, "s")
-    sample_time = h if sample_time is None else sample_time
-    continuous, plant, ts, _ = _discrete_plant(sample_time, damping)
+    ts = _positive("sample_time", h if sample_time is None else sample_time, "s")
     ratio = round(ts / h)
     if ratio < 1 or abs(ratio * h - ts) > 1e-9 * ts:
         raise ValueError(f"sample_time must be an integer multiple of the base step {h:g} s, got {ts:g} s")
-    loop = _closed_loop(plant, kp, kd, ki, d)
-    cx, cu, du = np.asarray(loop.C[:2]), np.asarray(loop.C[2:]), np.asarray(loop.D[2:])
+    continuous = _plant(matrices["damping"], matrices["stiffness"])
+    loop = _closed_loop(control.c2d(continuous, ts, method="zoh"), kp, kd, ki, d, matrices["stiffness"],
+                        matrices["compensation"])
+    cx, cu, du = np.asarray(loop.C[:2 * n]), np.asarray(loop.C[2 * n:]), np.asarray(loop.D[2 * n:])
     rows_c, rows_d = [], []
     for j in range(ratio):
         if j == 0:
-            phi, gamma = np.eye(2), np.zeros((2, 1))
+            phi, gamma = np.eye(2 * n), np.zeros((2 * n, n))
         else:
             part = control.c2d(continuous, j * h, method="zoh")
             phi, gamma = np.asarray(part.A), np.asarray(part.B)
-        rows_c.append((phi @ cx + gamma @ cu)[:1])
-        rows_d.append((gamma @ du)[:1])
+        rows_c.append((phi @ cx + gamma @ cu)[:n])
+        rows_d.append((gamma @ du)[:n])
     lifted = control.ss(loop.A, loop.B, np.vstack(rows_c), np.vstack(rows_d), dt=ts)
     samples = -(-len(t) // ratio)
     x0 = np.zeros(loop.nstates)
     if startup == "first" and d:
-        x0[-d:] = kp          # the delay line (the last d states) full of v_0 = kp r, r = 1
-    y = control.step_response(lifted, T=ts * np.arange(samples), X0=x0, squeeze=False).outputs[:, 0, :]
-    return amplitude * np.asarray(y, dtype=float).T.reshape(-1)[:len(t)]
+        x0[-d * n:] = np.tile(kp * amplitudes, d)   # the delay line full of v_0 = kp r
+    y = control.forced_response(lifted, T=ts * np.arange(samples), U=np.tile(amplitudes[:, None], samples),
+                                X0=x0, squeeze=False).outputs          # (ratio n, samples): row j n + i
+    return np.asarray(y, dtype=float).reshape(ratio, n, samples).transpose(2, 0, 1).reshape(-1, n)[:len(t)]
 
 
 def spectral_radius(kp: float, kd: float, ki: float, sample_time: float, delay_steps: int = 0,

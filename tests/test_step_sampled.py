@@ -131,6 +131,33 @@ def test_coupled_prediction_is_the_hand_written_linear_loop(gains, d):
         sampled.predict_coupled(**gains, t=t, amplitudes=r, stiffness=np.eye(2))
 
 
+def hand_radius(kp, kd, ts, K, d=1):
+    """Largest |eigenvalue| of the coupled PD loop with one sample of delay, built here: x = (y, y'),
+    x+ = Phi x + Gamma u (expm at ts), u = the previous sample's w = F x."""
+    n = K.shape[0]
+    augmented = np.zeros((3 * n, 3 * n))
+    augmented[:n, n:2 * n], augmented[n:2 * n, :n], augmented[n:2 * n, 2 * n:] = np.eye(n), -K, np.eye(n)
+    step = scipy.linalg.expm(augmented * ts)
+    phi, gamma = step[:2 * n, :2 * n], step[:2 * n, 2 * n:]
+    F = np.hstack([K - kp * np.eye(n), -kd * np.eye(n)])
+    loop = np.block([[phi, gamma], [F, np.zeros((n, n))]])
+    return float(np.max(np.abs(np.linalg.eigvals(loop))))
+
+
+def test_the_arms_kp_limit_is_where_the_coupled_loop_reaches_the_unit_circle():
+    """With rrp's gravity coupling, 4 ms, one sample late, kd 40: the coupled loop's limit lies below
+    the per-joint (Jury) limit, and a loop built here crosses |z| = 1 there; without coupling the two
+    limits agree."""
+    K = np.array([[0.0, 0.0, 0.0], [0.0, -0.8, 1260.0], [0.0, 9.8, 0.0]])
+    ts, kd = 4e-3, 40.0
+    arm = sampled.largest_stable_kp(kd, ts, 1, stiffness=K)
+    alone = sampled.largest_stable_kp(kd, ts, 1)
+    assert 0.95 * alone < arm < 0.995 * alone
+    assert hand_radius(arm * (1 - 1e-6), kd, ts, K) < 1.0 < hand_radius(arm * (1 + 1e-6), kd, ts, K)
+    assert sampled.spectral_radius(arm, kd, 0.0, ts, 1, stiffness=K) == pytest.approx(1.0, abs=1e-9)
+    assert sampled.largest_stable_kp(kd, ts, 1, stiffness=np.zeros((3, 3))) == pytest.approx(alone, rel=1e-9)
+
+
 # -- acceptance: every robot at 2 ms with one sample of delay -----------------------------------------
 @pytest.mark.parametrize("robot_name, gain_set", acceptance_cases())
 def test_sampled_delayed_step_matches_the_discrete_prediction(fmu_root, robot_name, gain_set):
@@ -184,6 +211,7 @@ def test_rrp_gravity_coupling_is_what_the_decoupled_prediction_misses(fmu_root):
         misses[ts, d] = np.max(np.abs(c.response - decoupled), axis=0) / np.abs(c.amplitudes) * 100.0
         assert c.max_deviation("sampled") < 0.2, c.table()
         assert c.deviation["sampled"][1] < 0.1 * misses[ts, d][1]
+        assert c.kp_limit_arm < c.kp_limit and "the arm linearized at the step's middle" in c.table()
     assert misses[2e-3, 1][1] > 3.0                               # the decoupled model would miss 3.9 %
     assert misses[2e-3, 1][1] / misses[1e-3, 0][1] == pytest.approx(6.0, rel=0.1)
 

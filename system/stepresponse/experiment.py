@@ -514,8 +514,12 @@ class Comparison:
     kp_limit : float or None
         The largest stable kp (1/s^2) at Ts and d with kd and ki held, the model exact
         (:func:`~.sampled.largest_stable_kp`); None without ``sample_time``, or if no kp is stable.
+    kp_limit_arm : float or None
+        The same for the joints' coupled loop linearized at the step's middle
+        (:func:`~.sampled.predict_coupled`'s, ``largest_stable_kp`` with its matrices): gravity's
+        stiffness felt through the held, delayed effort lowers it a little.
     spectral_radius : float or None
-        Largest |pole| of the predicted loop at the run's gains (< 1: stable).
+        Largest |pole| of the predicted (coupled) loop at the run's gains (< 1: stable).
     friction : list of FrictionMiss
         One per stepped joint with Coulomb friction unknown to the controller.
     divergence : str
@@ -544,6 +548,7 @@ class Comparison:
     sample_time: float | None = None
     delay_steps: int = 0
     kp_limit: float | None = None
+    kp_limit_arm: float | None = None
     spectral_radius: float | None = None
     friction: list = field(default_factory=list)
     divergence: str = ""
@@ -621,6 +626,10 @@ class Comparison:
             lines = [f"stability limit: largest stable kp {self.kp_limit:.6g} 1/s^2 at {where} held (python-control's "
                      f"discrete poles); kp {g['kp']:g} is {g['kp'] / self.kp_limit * 100:.1f} % of it, spectral "
                      f"radius {self.spectral_radius:.5f}"]
+            if self.kp_limit_arm is not None and abs(self.kp_limit_arm / self.kp_limit - 1.0) > 1e-6:
+                lines.append(f"  the arm linearized at the step's middle (gravity and damping felt through the held "
+                             f"effort): largest stable kp {self.kp_limit_arm:.6g} 1/s^2, kp {g['kp']:g} is "
+                             f"{g['kp'] / self.kp_limit_arm * 100:.1f} % of it")
         for f in self.friction:
             k = self.joints.index(f.joint)
             unit, amplitude = self.unit(f.joint), abs(float(self.amplitudes[k]))
@@ -714,12 +723,15 @@ def compare(result: Result, models: Sequence[str] = MODELS, settling: float = 0.
     joint_units, effort_units, symbols = _units_of(result, q0.size)
     sampled = {}
     if ts is not None:
-        try:
-            kp_limit = largest_stable_kp(kd, ts, d, ki)
-        except ValueError:                   # no kp is stable at this kd, ki, Ts and d
-            kp_limit = None
-        sampled = dict(sample_time=ts, delay_steps=d, kp_limit=kp_limit,
-                       spectral_radius=spectral_radius(kp, kd, ki, ts, d),
+        arm = {key: info["linearization"][key] for key in ("stiffness", "damping", "compensation")}
+        limits = []
+        for terms in ({}, arm):
+            try:
+                limits.append(largest_stable_kp(kd, ts, d, ki, **terms))
+            except ValueError:               # no kp is stable at this kd, ki, Ts and d
+                limits.append(None)
+        sampled = dict(sample_time=ts, delay_steps=d, kp_limit=limits[0], kp_limit_arm=limits[1],
+                       spectral_radius=spectral_radius(kp, kd, ki, ts, d, **arm),
                        friction=_friction_misses(info, joints, amplitudes, response, predictions.get("sampled"), beta))
     rate = "" if ts is None else f", controller every {ts * 1e3:g} ms, {d} sample{'s' * (d != 1)} late"
     return Comparison(time=t, joints=joints, amplitudes=amplitudes, response=response,

@@ -134,6 +134,25 @@ def _closed_loop(plant: control.StateSpace, kp: float, kd: float, ki: float, d: 
                                 outputs=outputs)
 
 
+def _coupling(n: int, **matrices) -> dict[str, np.ndarray]:
+    """Each of ``matrices`` (stiffness, damping, compensation) as a finite (n, n) array, zeros for None."""
+    checked = {}
+    for name, value in matrices.items():
+        value = np.zeros((n, n)) if value is None else np.asarray(value, dtype=float)
+        if value.shape != (n, n) or not np.all(np.isfinite(value)):
+            raise ValueError(f"{name} must be a finite ({n}, {n}) matrix, one row per joint, got shape {value.shape}")
+        checked[name] = value
+    return checked
+
+
+def _coupled_plant(sample_time, stiffness, damping, compensation) -> tuple[control.StateSpace, dict]:
+    """The n-joint plant of :func:`predict_coupled` discretized at ``sample_time``, and its checked matrices."""
+    ts = _positive("sample_time", sample_time, "s")
+    n = np.atleast_2d(np.asarray(stiffness)).shape[0]
+    matrices = _coupling(n, stiffness=stiffness, damping=damping, compensation=compensation)
+    return control.c2d(_plant(matrices["damping"], matrices["stiffness"]), ts, method="zoh"), matrices
+
+
 def _discrete_plant(sample_time, damping) -> tuple[control.StateSpace, control.StateSpace, float, float]:
     ts = _positive("sample_time", sample_time, "s")
     beta = _positive("damping", damping, "1/s", zero=True)
@@ -261,12 +280,7 @@ def predict_coupled(kp: float, kd: float, ki: float, t: np.ndarray, amplitudes, 
         raise ValueError(f"startup must be 'rest' or 'first', got {startup!r}")
     amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
     n = amplitudes.size
-    matrices = {}
-    for name, value in (("stiffness", stiffness), ("damping", damping), ("compensation", compensation)):
-        value = np.zeros((n, n)) if value is None else np.asarray(value, dtype=float)
-        if value.shape != (n, n) or not np.all(np.isfinite(value)):
-            raise ValueError(f"{name} must be a finite ({n}, {n}) matrix, one row per joint stepped, got shape {value.shape}")
-        matrices[name] = value
+    matrices = _coupling(n, stiffness=stiffness, damping=damping, compensation=compensation)
     t = np.asarray(t, dtype=float)
     h = _positive("h", t[1] - t[0] if h is None else h, "s")
     ts = _positive("sample_time", h if sample_time is None else sample_time, "s")
@@ -297,17 +311,25 @@ def predict_coupled(kp: float, kd: float, ki: float, t: np.ndarray, amplitudes, 
 
 
 def spectral_radius(kp: float, kd: float, ki: float, sample_time: float, delay_steps: int = 0,
-                    damping: float = 0.0) -> float:
+                    damping=0.0, *, stiffness=None, compensation=None) -> float:
     """Largest |pole| of :func:`sampled_prediction` (``control.poles``): stable iff < 1.
 
     Each sample multiplies the slowest error by about this radius, so -Ts / ln(radius) is the
-    slowest time constant (s) of a stable loop.
+    slowest time constant (s) of a stable loop. With ``stiffness`` (n, n) it is the coupled loop
+    of :func:`predict_coupled` (``damping`` and ``compensation`` then (n, n) matrices or None).
     """
-    return float(np.max(np.abs(control.poles(sampled_prediction(kp, kd, ki, sample_time, delay_steps, damping)))))
+    if stiffness is None and compensation is None:
+        loop = sampled_prediction(kp, kd, ki, sample_time, delay_steps, damping)
+    else:
+        kp, kd, ki = check_gains(kp, kd, ki)
+        plant, m = _coupled_plant(sample_time, stiffness, None if np.isscalar(damping) and damping == 0.0 else damping,
+                                  compensation)
+        loop = _closed_loop(plant, kp, kd, ki, _delay(delay_steps), m["stiffness"], m["compensation"])
+    return float(np.max(np.abs(control.poles(loop))))
 
 
 def largest_stable_kp(kd: float | None, sample_time: float, delay_steps: int = 0, ki: float = 0.0, *,
-                      zeta: float | None = None, damping: float = 0.0) -> float:
+                      zeta: float | None = None, damping=0.0, stiffness=None, compensation=None) -> float:
     """The largest kp (1/s^2) at which every pole of :func:`sampled_prediction` is inside the unit circle.
 
     Two forms, one of ``kd`` and ``zeta`` given:
@@ -333,8 +355,11 @@ def largest_stable_kp(kd: float | None, sample_time: float, delay_steps: int = 0
         Integral gain (1/s^3), held; 0 for PD.
     zeta : float, optional
         Damping ratio held instead of ``kd``, > 0.
-    damping : float
-        beta (1/s), as in :func:`sampled_prediction`.
+    damping : float or array_like (n, n)
+        beta (1/s), as in :func:`sampled_prediction`; with ``stiffness``, B of :func:`predict_coupled`.
+    stiffness, compensation : array_like (n, n), optional
+        K and B_c of :func:`predict_coupled`: the limit of the n joints' coupled loop (the arm
+        linearized), which gravity's stiffness felt through the held, delayed effort lowers.
 
     Returns
     -------
@@ -347,11 +372,17 @@ def largest_stable_kp(kd: float | None, sample_time: float, delay_steps: int = 0
         zeta = _positive("zeta", zeta, "")
     _, kd_held, ki = check_gains(1.0, 1.0 if kd is None else kd, ki)
     d = _delay(delay_steps)
-    _, plant, ts, _ = _discrete_plant(sample_time, damping)
+    if stiffness is None and compensation is None:
+        _, plant, ts, _ = _discrete_plant(sample_time, damping)
+        model_terms = {}
+    else:
+        plant, m = _coupled_plant(sample_time, stiffness, None if np.isscalar(damping) and damping == 0.0 else damping,
+                                  compensation)
+        ts, model_terms = plant.dt, dict(stiffness=m["stiffness"], compensation=m["compensation"])
 
     def margin(kp: float) -> float:
         kd_now = kd_held if zeta is None else 2.0 * zeta * math.sqrt(kp)
-        return float(np.max(np.abs(control.poles(_closed_loop(plant, kp, kd_now, ki, d))))) - 1.0
+        return float(np.max(np.abs(control.poles(_closed_loop(plant, kp, kd_now, ki, d, **model_terms))))) - 1.0
 
     stable_at = None
     for kp in 2.0 ** np.arange(-40, 11) / ts**2:
@@ -362,7 +393,7 @@ def largest_stable_kp(kd: float | None, sample_time: float, delay_steps: int = 0
     held = f"kd = {kd_held:g} 1/s" if zeta is None else f"zeta = {zeta:g}"
     what = "is stable at no kp" if stable_at is None else f"is still stable at kp = {stable_at:g} 1/s^2"
     raise ValueError(f"the loop with {held}, ki = {ki:g} 1/s^3, sample_time = {ts:g} s, delay_steps = {d}, "
-                     f"damping = {float(damping):g} 1/s {what}")
+                     f"damping = {np.max(np.abs(damping)):g} 1/s{' (coupled)' * bool(model_terms)} {what}")
 
 
 def friction_steady_state_error(kp: float, coulomb: float, inertia: float, ki: float = 0.0) -> float:

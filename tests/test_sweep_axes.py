@@ -14,7 +14,7 @@ from robofmu.system import analysis, experiment
 from robofmu.system.master import Master
 from robofmu.system.roles import Roles
 from robofmu.system.run import run_experiment
-from robofmu.system.sweep.design import Design, parse_axis
+from robofmu.system.sweep.design import Design, DesignError, parse_axis
 from robofmu.system.sweep.run import check, run_sweep
 from robofmu.system.sweep.worker import run_one
 
@@ -26,13 +26,16 @@ COMPARED = ["max_tcp_error", "final_tcp_error", "max_joint_error", "peak_effort"
                                                               "final_joint_error", "peak_effort")]]
 
 
-def by_hand(fmu_root, sample_time=None, friction=None, delay=None, stop=STOP):
-    """A single run of the experiment with its settings put on the System directly."""
+def by_hand(fmu_root, sample_time=None, friction=None, delay=None, stop=STOP, known=None):
+    """A single run of the experiment with its settings put on the System directly (``known``:
+    the friction the controller compensates)."""
     system = experiment.load(EXPERIMENT, fmu_dir=fmu_root)
     if sample_time is not None:
         system.block("controller").sample_time = sample_time
     if friction is not None:
         system.block("plant").parameters["friction"] = [friction] * N
+    if known is not None:
+        system.block("controller").parameters["friction"] = [known] * N
     if delay is not None:
         system.block("controller").parameters["delay_steps"] = delay
     result = Master(system).run(stop_time=stop)
@@ -88,6 +91,41 @@ def test_delay_steps_is_an_integer_axis_and_its_row_is_the_single_run(fmu_root):
         for name, value in expected(tracking).items():
             assert row[name] == pytest.approx(value, abs=1e-12, rel=0), (delay, name)
     assert rows[1]["max_tcp_error"] > rows[0]["max_tcp_error"]
+
+
+def test_a_linked_axis_takes_its_leaders_value_and_adds_no_dimension(fmu_root):
+    """``controller.friction=plant.friction``: friction known to the controller over the same grid;
+    each row is the hand-made run with both set, and knowing the friction removes most of its error."""
+    axes = [parse_axis("controller.sample_time=0.001,0.004"), parse_axis("plant.friction=0,0.05"),
+            parse_axis("controller.friction=plant.friction")]
+    design = Design(EXPERIMENT, axes, stop_time=0.2)
+    assert [a.name for a in design.grid_axes] == ["controller.sample_time", "plant.friction"]
+    assert axes[2].describe() == "controller.friction: as plant.friction"
+    system, _, _, _, runs = check(design, fmu_root)
+    assert [(r["controller.sample_time"], r["plant.friction"], r["controller.friction"]) for r in runs] == \
+        [(0.001, 0, 0), (0.001, 0.05, 0.05), (0.004, 0, 0), (0.004, 0.05, 0.05)]
+    assert Design.from_json(design.to_json()).same_as(design)
+    rows = [run_one(system, r, 0.2, None) for r in runs]
+    assert [r["status"] for r in rows] == ["ok"] * 4, rows
+    for run, row in zip(runs, rows):
+        _, tracking = by_hand(fmu_root, run["controller.sample_time"], run["plant.friction"], stop=0.2,
+                              known=run["controller.friction"])
+        for name, value in expected(tracking).items():
+            assert row[name] == pytest.approx(value, abs=1e-12, rel=0), (run, name)
+    _, unknown = by_hand(fmu_root, 0.001, 0.05, stop=0.2)
+    assert rows[1]["max_tcp_error"] < 0.1 * unknown.tcp_error.max()
+
+
+@pytest.mark.parametrize("texts, named", [
+    (["controller.friction=plant.friction"], "--vary controller.friction=plant.friction"),
+    (["plant.friction=0,1", "controller.friction=plant.damping"], "--vary controller.friction=plant.damping"),
+    (["plant.friction=0,1", "controller.friction=plant.friction", "controller.damping=controller.friction"],
+     "--vary controller.damping=controller.friction"),
+])
+def test_a_linked_axis_follows_a_varied_axis(texts, named):
+    with pytest.raises(DesignError, match="a linked axis follows another --vary") as caught:
+        Design(EXPERIMENT, [parse_axis(t) for t in texts])
+    assert str(caught.value).startswith(named)
 
 
 def test_run_set_sample_time_is_the_same_override(fmu_root, tmp_path):

@@ -19,8 +19,9 @@ def add_parser(subparsers):
                     "and report.md. A rerun of the same sweep into the same DIR skips the runs already done; "
                     "Ctrl-C keeps every finished row (exit status 130). VALUES: a comma list 200,400,800, a "
                     "range START:STOP:COUNT (both ends included), or a distribution uniform(LOW,HIGH) / "
-                    "normal(MEAN,STD) drawn --samples times with --seed. 'step_size=VALUES' varies the "
-                    "communication step.")
+                    "normal(MEAN,STD) drawn --samples times with --seed, or another varied BLOCK.PARAM whose "
+                    "value it takes in every run (a linked axis, e.g. controller.friction=plant.friction). "
+                    "'step_size=VALUES' varies the communication step.")
     p.add_argument("experiment", metavar="EXPERIMENT", help="experiment name or TOML file")
     p.add_argument("--vary", action="append", metavar="BLOCK.PARAM=VALUES", required=True,
                    help="a varied block parameter (repeatable; the grid is their product)")

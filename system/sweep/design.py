@@ -8,6 +8,11 @@
 - a distribution for random sampling, ``uniform(LOW,HIGH)`` or ``normal(MEAN,STD)``, drawn
   ``--samples`` times from a generator seeded with ``--seed``.
 
+``--vary BLOCK.PARAM=OTHER.PARAM`` links an axis to another one: it takes that axis's value in
+every run and adds no dimension (``controller.friction=plant.friction``: the friction the
+controller compensates follows the plant's, friction known to it, over the same map as
+``controller.loss_compensation=0`` gives unknown).
+
 ``BLOCK.sample_time`` varies a block's sample time (s; a grid only, each value a whole multiple of
 every step the sweep runs at), ``controller.delay_steps`` its computation delay; a vector
 parameter given one value (``plant.friction``) sets every element to it
@@ -77,11 +82,15 @@ class Axis:
         The grid values (empty for a distribution).
     distribution : tuple or None
         ``("uniform", low, high)`` or ``("normal", mean, std)`` for random sampling.
+    follows : str or None
+        The name of the axis whose value this one takes in every run (a linked axis: no values,
+        no distribution, no dimension of the grid).
     """
 
     name: str
     values: tuple = ()
     distribution: tuple | None = None
+    follows: str | None = None
 
     @property
     def block(self) -> str | None:
@@ -98,7 +107,10 @@ class Axis:
         return self.distribution is not None
 
     def describe(self) -> str:
-        """``controller.kp: 200, 400, 800`` or ``plant.payload_mass: uniform(0, 0.3)``."""
+        """``controller.kp: 200, 400, 800``, ``plant.payload_mass: uniform(0, 0.3)`` or
+        ``controller.friction: as plant.friction``."""
+        if self.follows:
+            return f"{self.name}: as {self.follows}"
         if self.random:
             kind, a, b = self.distribution
             return f"{self.name}: {kind}({a:g}, {b:g})"
@@ -135,6 +147,12 @@ def _axis(text: str, option: str) -> Axis:
             parameter_address(name)
         except ValueError as exc:
             raise DesignError(f"{option}: {exc} nor {STEP_SIZE_AXIS!r}") from None
+    if re.fullmatch(r"\s*[A-Za-z_]\w*\.[A-Za-z_][\w\[\]]*\s*", values):
+        try:
+            parameter_address(values.strip())
+        except ValueError as exc:
+            raise DesignError(f"{option}: {exc}") from None
+        return Axis(name, follows=values.strip())
     match = _DISTRIBUTION.match(values)
     if match:
         kind, a, b = match.group(1), float(match.group(2)), float(match.group(3))
@@ -207,7 +225,14 @@ class Design:
             if self.samples < 1:
                 raise DesignError(f"--samples {self.samples}: must be at least 1")
         whole("--seed", self.seed, 0)
-        grid = [a for a in self.axes if not a.random]
+        for a in self.axes:
+            if not a.follows:
+                continue
+            leader = next((b for b in self.axes if b.name == a.follows), None)
+            if leader is None or leader.follows or a.follows == a.name:
+                raise DesignError(f"--vary {a.name}={a.follows}: a linked axis follows another --vary that is varied "
+                                  f"itself ({', '.join(b.name for b in self.axes if not b.follows) or 'none'})")
+        grid = self.grid_axes
         count = math.prod(len(a.values) for a in grid) * (self.samples or 1)
         check_runs(count, " x ".join([f"--vary {a.name} ({len(a.values)} values)" for a in grid]
                                      + ([f"--samples {self.samples}"] if self.samples else [])))
@@ -222,7 +247,8 @@ class Design:
 
     @property
     def grid_axes(self) -> list[Axis]:
-        return [a for a in self.axes if not a.random]
+        """The axes whose values make the grid: neither random nor linked."""
+        return [a for a in self.axes if not a.random and not a.follows]
 
     @property
     def random(self) -> bool:
@@ -244,6 +270,7 @@ class Design:
                 fixed = dict(zip((a.name for a in grid), point))
                 for k in range(self.samples or 1):
                     run = dict(fixed, **{name: values[k] for name, values in draws.items()})
+                    run.update({a.name: run[a.follows] for a in self.axes if a.follows})
                     runs.append({name: run[name] for name in self.names})
             self.runs_cache = runs
         return self.runs_cache
@@ -252,14 +279,15 @@ class Design:
         data = {"experiment": self.experiment, "samples": self.samples, "seed": self.seed,
                 "stop_time": self.stop_time, "step": self.step,
                 "axes": [{"name": a.name, "values": list(a.values),
-                          "distribution": list(a.distribution) if a.distribution else None} for a in self.axes]}
+                          "distribution": list(a.distribution) if a.distribution else None}
+                         | ({"follows": a.follows} if a.follows else {}) for a in self.axes]}
         return json.dumps(data, indent=2) + "\n"
 
     @classmethod
     def from_json(cls, text: str) -> "Design":
         data = json.loads(text)
         axes = [Axis(RENAMED_AXES.get(a["name"], a["name"]), tuple(a["values"]),
-                     tuple(a["distribution"]) if a["distribution"] else None) for a in data["axes"]]
+                     tuple(a["distribution"]) if a["distribution"] else None, a.get("follows")) for a in data["axes"]]
         return cls(data["experiment"], axes, data["samples"], data["seed"], data["stop_time"], data["step"])
 
     def same_as(self, other: "Design") -> bool:

@@ -171,7 +171,9 @@ def _ranges(run: SweepRun, rows: list[dict]) -> list[str]:
             values = np.array([_number(t) for t in texts])
             low, high = f"{values.min():.4g}", f"{values.max():.4g}"
             shown_values = (low if low == high else f"{low} to {high}") + (f" {unit}" if unit else "")
-            if not axis.random:
+            if axis.follows:
+                shown_values += f" (as {axis.follows})"
+            elif not axis.random:
                 shown_values += f" ({len(set(texts))} of {len(axis.values)} values)"
         lines.append(f"- `{axis.name}`: {shown_values}")
     return lines

@@ -118,7 +118,8 @@ def check(design: Design, fmu_dir):
         if axis.name == STEP_SIZE_AXIS:
             continue
         if axis.parameter == experiment.SAMPLE_TIME:
-            _check_sample_times(system, base, axis, steps or [design.step], design.stop_time)
+            leader = next((a for a in design.axes if a.name == axis.follows), axis)
+            _check_sample_times(system, base, replace(leader, name=axis.name), steps or [design.step], design.stop_time)
             kinds[axis.name], units[axis.name] = "Real", "s"
             continue
         node = base.nodes[axis.block]

@@ -55,7 +55,7 @@ from robofmu.components.robots import RobotDescription, is_robot_file, load_desc
 from robofmu.components.robots.description import PROFILE_PREFIX
 
 from robofmu.system import defaults
-from robofmu.system.diagram import System, Wire, parameter_address
+from robofmu.system.diagram import System, Wire, expand, parameter_address
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 #: The ``BLOCK.PARAM`` name of a block's sample time in an override (:func:`with_parameters`).
@@ -545,7 +545,8 @@ def with_parameters(system: System, values: dict) -> System:
     override of an experiment (``robofmu run --set``, a sweep's ``--vary``).
 
     ``BLOCK.sample_time`` (:data:`SAMPLE_TIME`) sets the block's sample time in s, as ``[[blocks]]
-    sample_time`` does, not a FMU parameter.
+    sample_time`` does, not a FMU parameter. One number for a vector parameter
+    (``plant.friction``) sets every element; ``plant.friction[2]`` sets one.
 
     Raises
     ------
@@ -572,5 +573,20 @@ def with_parameters(system: System, values: dict) -> System:
                 raise ValueError(f"{name}: must be a time in s > 0, got {value!r}")
             configured.block(block).sample_time = float(value)
         else:
-            configured.block(block).parameters[parameter] = value
+            configured.block(block).parameters[parameter] = spread_over_elements(configured, block, parameter, value)
     return configured
+
+
+def spread_over_elements(system: System, block: str, parameter: str, value):
+    """``value`` as given, or one number for a vector parameter (``plant.friction``: every joint's)
+    repeated over its elements, their count read from the block's FMU (as given when unreadable)."""
+    if isinstance(value, (list, tuple)):
+        return value
+    from robofmu.system.plan import described
+
+    path = system.fmu_path(system.block(block))
+    model_description = described(path)[1] if Path(path).is_file() else None
+    if model_description is None:
+        return value
+    width = len(expand([v.name for v in model_description.modelVariables], parameter))
+    return [value] * width if width > 1 else value

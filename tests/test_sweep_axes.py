@@ -141,6 +141,27 @@ def test_run_set_sample_time_is_the_same_override(fmu_root, tmp_path):
     assert not np.array_equal(single["controller.tau[1]"], result["controller.tau[1]"])
 
 
+def test_run_set_of_one_number_for_a_vector_parameter_sets_every_element(fmu_root, tmp_path, capsys):
+    """``run --set plant.friction=0.05`` (and ``step --set``) is every joint's friction, as the
+    sweep's ``--vary plant.friction=0.05`` is: the run equals the System with the vector set."""
+    run = run_experiment(EXPERIMENT, tmp_path / "out", fmu_dir=fmu_root, stop_time=0.2, progress=False,
+                         figures=False, parameters={"plant.friction": 0.05})
+    result, _ = by_hand(fmu_root, friction=0.05, stop=0.2)
+    for column in ("controller.tau[1]", "plant.q[3]"):
+        assert np.array_equal(run.result[column], result[column]), column
+    configured = experiment.with_parameters(experiment.load(EXPERIMENT, fmu_dir=fmu_root),
+                                            {"plant.friction": 0.05, "plant.friction_velocity": [0.01] * N})
+    assert configured.block("plant").parameters["friction"] == [0.05] * N
+    assert configured.block("plant").parameters["friction_velocity"] == [0.01] * N
+    from robofmu.system.stepresponse import experiment as step_experiment
+    stepped = step_experiment.cosimulate_step(fmu_root, 400.0, 40.0, robot="rrp", stop_time=0.05,
+                                              parameters={"plant.friction": 0.5})
+    assert stepped.info["unknown_friction"] == [0.5] * N          # the plant's alone
+    assert step_experiment.cosimulate_step(fmu_root, 400.0, 40.0, robot="rrp", stop_time=0.05,
+                                           parameters={"plant.friction": 0.5, "controller.friction": 0.5}
+                                           ).info["unknown_friction"] == [0.0] * N     # known: compensated
+
+
 @pytest.mark.parametrize("args, names", [
     (["sweep", EXPERIMENT, "--vary", "controller.sample_time=0.001,0.0025"],
      ["--vary controller.sample_time=0.0025", "block 'controller': sample_time = 0.0025 s is not a whole multiple "

@@ -39,7 +39,8 @@ def add_parser(subparsers):
     options.add_algorithm(p)
     options.add_fmus(p)
     p.add_argument("--set", action="append", metavar=options.PARAMETER_SETTING,
-                   help="set a block parameter over the experiment's (repeatable), e.g. controller.kp=400")
+                   help="set a block parameter over the experiment's (repeatable), e.g. controller.kp=400; one "
+                        "number for a vector parameter sets every element (plant.friction=0.5)")
     p.add_argument("--format", choices=["csv", "parquet"], default="csv",
                    help="results.csv (default) or results.parquet: binary, exact, with units; for large runs")
     p.add_argument("--debug", action="store_true",

@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 
 from robofmu.system import analysis
-from robofmu.system.diagram import expand, parameter_address
-from robofmu.system.experiment import SAMPLE_TIME, with_parameters
+from robofmu.system.diagram import parameter_address
+from robofmu.system.experiment import SAMPLE_TIME, spread_over_elements, with_parameters
 from robofmu.system.master import Master, SimulationError
 from robofmu.system.roles import Roles
 from robofmu.system.sweep.design import STEP_SIZE_AXIS
@@ -31,7 +31,8 @@ _ONE_RUN_AT_A_TIME = threading.Lock()
 def block_settings(system, values: dict) -> dict:
     """A run's ``values`` as the experiment's override takes them
     (:func:`~robofmu.system.experiment.with_parameters`): the step size left out, and one number
-    for a vector parameter (``plant.friction``: every joint's) spread over its elements.
+    for a vector parameter (``plant.friction``: every joint's) spread over its elements
+    (:func:`~robofmu.system.experiment.spread_over_elements`, as ``with_parameters`` does).
 
     Parameters
     ----------
@@ -40,19 +41,12 @@ def block_settings(system, values: dict) -> dict:
     values : dict
         ``BLOCK.PARAM`` (and :data:`~robofmu.system.sweep.design.STEP_SIZE_AXIS`) -> value.
     """
-    from robofmu.system.plan import described
-
     settings = {}
     for name, value in values.items():
         if name == STEP_SIZE_AXIS:
             continue
         block, parameter = parameter_address(name)
-        if parameter != SAMPLE_TIME and not isinstance(value, (list, tuple)):
-            model_description = described(system.fmu_path(system.block(block)))[1]
-            if model_description is not None:
-                width = len(expand([v.name for v in model_description.modelVariables], parameter))
-                value = [value] * width if width > 1 else value
-        settings[name] = value
+        settings[name] = value if parameter == SAMPLE_TIME else spread_over_elements(system, block, parameter, value)
     return settings
 
 

@@ -266,6 +266,28 @@ class CosimRun:
             run.slaves[info.name.decode()] = _Slave(index, path, run._variables(index), None)
         return run
 
+    @classmethod
+    def from_osp(cls, path: str | Path, step_size: float, log_level: str | None = "WARNING",
+                 last_value: bool = True) -> "CosimRun":
+        """An execution loaded by libcosim from an OSP system structure (``OspSystemStructure.xml``
+        or its folder): its simulators with their step sizes, connections, initial values, base
+        step and start time (:mod:`robofmu.system.interop.osp`). ``step_size`` is the file's base
+        step (s; libcosim takes it from the file, this only records it); ``last_value`` as in
+        :meth:`from_ssp`."""
+        from libcosimpy.CosimExecution import CosimExecution
+
+        _set_log_level(log_level)
+        path = Path(path)
+        try:
+            execution = CosimExecution.from_osp_config_file(str(path))
+        except AssertionError:
+            raise CosimError(f"libcosim: loading {path} failed: {cls.last_error()}") from None
+        run = cls(step_size, None, execution=execution, last_value=last_value)
+        for info in execution.slave_infos():
+            index = int(info.index)
+            run.slaves[info.name.decode()] = _Slave(index, path, run._variables(index), None)
+        return run
+
     def _variables(self, index: int) -> dict[str, CosimVariable]:
         variables = {}
         for v in self.execution.slave_variables(index):

@@ -190,6 +190,30 @@ def element_names(blocks: list[str]) -> dict[str, str]:
     return names
 
 
+def fmu_names(system: System) -> dict[Path, str]:
+    """The file name of each distinct FMU of ``system`` in an export (absolute FMU path -> name):
+    the FMU's own name, ``_2``, ``_3`` .. added where two files share one."""
+    sources: dict[Path, str] = {}
+    used: set[str] = set()
+    for spec in system.blocks:
+        fmu = system.fmu_path(spec).resolve()
+        if fmu in sources:
+            continue
+        stem, k, name = fmu.stem, 1, fmu.name
+        while name in used:
+            k += 1
+            name = f"{stem}_{k}.fmu"
+        used.add(name)
+        sources[fmu] = name
+    return sources
+
+
+def xml_bytes(root: ET.Element) -> bytes:
+    """An XML document's bytes as the exports write them: indented, UTF-8, declared."""
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
+
+
 def _parameter_set(parent, name: str, values) -> ET.Element:
     attrs = {"version": "1.0", "name": name}
     pset = ET.SubElement(parent, _q("ssv:ParameterSet"), attrs) if parent is not None \
@@ -199,11 +223,6 @@ def _parameter_set(parent, name: str, values) -> ET.Element:
         p = ET.SubElement(params, _q("ssv:Parameter"), {"name": pname})
         ET.SubElement(p, _q(f"ssv:{kind}"), {"value": text})
     return pset
-
-
-def _xml_bytes(root: ET.Element) -> bytes:
-    ET.indent(root, space="  ")
-    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
 
 
 def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
@@ -229,19 +248,7 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
     single_rate(system, "SSP")          # no standard rate per component
     planned = plan(system)
 
-    # FMUs under resources/: one copy per distinct file, names made unique
-    sources: dict[Path, str] = {}
-    used: set[str] = set()
-    for spec in system.blocks:
-        fmu = system.fmu_path(spec).resolve()
-        if fmu in sources:
-            continue
-        stem, k, name = fmu.stem, 1, fmu.name
-        while name in used:
-            k += 1
-            name = f"{stem}_{k}.fmu"
-        used.add(name)
-        sources[fmu] = name
+    sources = fmu_names(system)         # FMUs under resources/: one copy per distinct file
 
     wired = {(link.target, link.input) for link in planned.links}
     system_name = ssp_identifier(system.name)
@@ -291,7 +298,7 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
                 source = f"resources/{element[spec.name]}.ssv"
                 ET.SubElement(bindings, _q("ssd:ParameterBinding"),
                               {"type": "application/x-ssp-parameter-set", "source": source})
-                ssv_files[source] = _xml_bytes(_parameter_set(None, set_name, values))
+                ssv_files[source] = xml_bytes(_parameter_set(None, set_name, values))
 
     connections = ET.SubElement(sys_el, _q("ssd:Connections")) if planned.links else None
     for src, out, dst, inp in planned.links:
@@ -323,7 +330,7 @@ def export_ssp(system: System, path: str | Path, inline: bool = False) -> Path:
                   {"baseStepSize": _fmt_real(system.step)})
 
     with atomic_file(path) as partial, zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        zf.writestr(SSD_NAME, _xml_bytes(root))
+        zf.writestr(SSD_NAME, xml_bytes(root))
         for fmu, name in sources.items():
             zf.write(fmu, f"resources/{name}")
         for name, data in ssv_files.items():

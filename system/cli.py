@@ -28,12 +28,12 @@ import argparse
 import importlib
 import sys
 
-from robofmu.system.commands import build, container, demo, doctor, inspect, new, run, ssp, sweep, workspace
+from robofmu.system.commands import build, container, demo, doctor, inspect, new, osp, run, ssp, sweep, workspace
 
 #: The subcommands in the order ``robofmu --help`` lists them. ``step`` and ``convergence``
 #: import python-control or scipy's integrators: their modules are loaded only when asked for
 #: (name, module, one-line help).
-COMMANDS = [new, inspect, build, run, sweep, ssp, container, ("step", "robofmu.system.commands.step",
+COMMANDS = [new, inspect, build, run, sweep, ssp, osp, container, ("step", "robofmu.system.commands.step",
                                                  "co-simulate a joint reference step and compare it with "
                                                  "linear predictions"),
             ("convergence", "robofmu.system.commands.convergence",

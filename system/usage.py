@@ -67,13 +67,14 @@ class Outputs:
 
 
 #: The outputs of each command that writes a folder: the one statement of which existing folders
-#: it may replace (``run``, ``workspace``, ``convergence``, ``demo``) or continue (``sweep``).
+#: it may replace (``run``, ``workspace``, ``convergence``, ``osp``, ``demo``) or continue (``sweep``).
 OUTPUTS = {
     "run": Outputs(("results.csv", "results.parquet", "report.md", "run.log", "*.png")),
     "sweep": Outputs(("sweep.json", "sweep.csv", "sweep.csv.tmp", "sweep.parquet", "sweep.parquet.tmp",
                       "report.md", "*.png", f".*{PARTIAL}"), folders=("runs",)),
     "workspace": Outputs(("*.md", "*.png")),
     "convergence": Outputs(("convergence.md", "convergence.png", "convergence.json")),
+    "osp": Outputs(("OspSystemStructure.xml", "*.fmu")),
     "demo": Outputs(("*.md", "*.png", "*.csv"), folders=("*",)),
 }
 

@@ -16,6 +16,7 @@ from robofmu.system.diagram import System  # noqa: E402
 from robofmu.system.result import Result  # noqa: E402
 from robofmu.system.roles import Roles  # noqa: E402
 from robofmu.system.units import printed, small  # noqa: E402
+from robofmu.system.usage import atomic_file  # noqa: E402
 
 COLORS = ["tab:red", "tab:green", "tab:blue", "k", "tab:orange", "tab:purple"]
 #: The iterative IK solvers' diagnostics a run may record as outputs ``<instance>.<name>``, and the
@@ -23,13 +24,18 @@ COLORS = ["tab:red", "tab:green", "tab:blue", "k", "tab:orange", "tab:purple"]
 DIAGNOSTICS = {"iterations": "iterations", "residual": "residual", "position_residual": "residual"}
 
 
-def _save(fig, path: Path, tight: bool = True) -> Path:
-    """Write ``fig`` as PNG (110 dpi; laid out tight unless ``tight`` is false) and close it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+def save_figure(fig, path: Path, tight: bool = True, dpi: int = 110) -> Path:
+    """Write ``fig`` as PNG (laid out tight unless ``tight`` is false) and close it: every figure
+    robofmu writes goes through here, to a temporary sibling renamed into place
+    (:func:`~robofmu.system.usage.atomic_file`), so an interrupted run leaves no half-written PNG."""
+    path = Path(path)
     if tight:
         fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic_file(path) as partial:
+            fig.savefig(partial, dpi=dpi, format="png")
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -55,7 +61,7 @@ def _profile(result: Result, path: Path, bases: list[str], labels: list[str], ti
     axes[0].legend(ncol=len(labels), loc="upper right")
     axes[0].set_title(title)
     axes[-1].set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def task_reference(result: Result, roles: Roles, path: Path) -> Path:
@@ -100,7 +106,7 @@ def tracking(result: Result, roles: Roles, path: Path, title: str) -> Path:
     axes[0, 1].set_title("tracking error" + (" (grey: payload carried)" if roles.grip else ""))
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def efforts(result: Result, roles: Roles, path: Path, title: str) -> Path:
@@ -118,7 +124,7 @@ def efforts(result: Result, roles: Roles, path: Path, title: str) -> Path:
         ax.grid(alpha=0.3)
     axes[0, 0].set_title(f"{title}: joint efforts")
     axes[-1, 0].set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def pose(result: Result, roles: Roles, path: Path, title: str) -> Path:
@@ -151,7 +157,7 @@ def pose(result: Result, roles: Roles, path: Path, title: str) -> Path:
     axes[0, 1].set_title("x_ref - x" if x_ref is not None else "x - x(0): change from the start")
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 #: How :func:`mechanism` draws each kind of polyline a model's ``sketch(q)`` returns.
 SKETCH_STYLES = {"links": dict(lw=2.5, solid_capstyle="round"), "passive": dict(lw=1.0, ls="--"),
@@ -205,7 +211,7 @@ def tool_pose(result: Result, roles: Roles, path: Path, title: str) -> Path:
     bottom.set_xlabel("time (s)")
     for a in (top, bottom):
         a.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def mechanism(result: Result, roles: Roles, path: Path, title: str, instants: int = 6) -> Path | None:
@@ -242,7 +248,7 @@ def mechanism(result: Result, roles: Roles, path: Path, title: str, instants: in
     ax.set_title(f"{title}: the mechanism at {len(picks)} instants")
     ax.legend(fontsize=8, loc="best")
     ax.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 def error_comparison(results: dict[str, Result], roles: Roles, path: Path, title: str) -> Path:
     """Seed 002 Fig. 11: the tracking error of several runs of one diagram, per joint."""
@@ -264,7 +270,7 @@ def error_comparison(results: dict[str, Result], roles: Roles, path: Path, title
     axes[-1, 0].legend(handles, labels, ncol=3, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.35))
     axes[0, 0].set_title(title)
     axes[-1, 0].set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def tcp_error(results: dict[str, tuple[np.ndarray, np.ndarray]], path: Path) -> Path:
@@ -278,7 +284,7 @@ def tcp_error(results: dict[str, tuple[np.ndarray, np.ndarray]], path: Path) -> 
     ax.set_title("Task-point error |FK(q) - x_ref| against the reference")
     ax.legend(fontsize=8, ncol=3)
     ax.grid(alpha=0.3, which="both")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def solver_diagnostics(result: Result) -> dict[str, dict[str, np.ndarray]]:
@@ -343,7 +349,7 @@ def iterations(results: dict[str, Result], path: Path, title: str,
     axes[1, 0].set_ylabel(f"residual |F|{f' ({unit})' if unit else ''}")
     axes[1, 0].set_ylim(tiny / 100.0, axes[1, 0].get_ylim()[1])
     fig.suptitle(title, fontsize=11)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def residual_history(histories: dict[str, list[float]], path: Path, title: str,
@@ -363,7 +369,7 @@ def residual_history(histories: dict[str, list[float]], path: Path, title: str,
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8, loc="lower left")
     ax.grid(alpha=0.3, which="both")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def block_diagram(system: System, path: Path, order: list[str] | None = None) -> Path:
@@ -420,7 +426,7 @@ def block_diagram(system: System, path: Path, order: list[str] | None = None) ->
     ax.set_aspect("equal")
     ax.axis("off")
     ax.set_title(f"{system.name}: {system.description}", fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def constraint_residual(checks: dict, path: Path, title: str) -> Path:
@@ -444,4 +450,4 @@ def constraint_residual(checks: dict, path: Path, title: str) -> Path:
         ax.legend(fontsize=7, ncol=2, loc="lower right")
     top.set_title(title, fontsize=10)
     bottom.set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -107,6 +107,27 @@ def test_ctrl_c_while_the_ssp_is_written_leaves_the_earlier_package(capfd, tmp_p
     assert listing(tmp_path) == ["line.ssp"]
 
 
+def test_ctrl_c_while_a_figure_is_written_leaves_the_earlier_figure(capfd, tmp_path, fmu_root, monkeypatch):
+    """Every PNG goes through plots.save_figure (a temporary sibling renamed into place): Ctrl-C
+    half-way through matplotlib's write leaves the earlier figure byte for byte, nothing beside it."""
+    from matplotlib.figure import Figure
+
+    out = tmp_path / "step"
+    argv = ["step", "--robot", "rpp", "--stop-time", "0.05", "--fmus", str(fmu_root), "--out", str(out)]
+    assert main(argv) == 0
+    capfd.readouterr()
+    (figure,) = out.glob("*.png")
+    before = listing(out)
+
+    def interrupted(self, fname, *args, **kwargs):
+        Path(fname).write_bytes(b"\x89PNG half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Figure, "savefig", interrupted)
+    assert_refused(capfd, argv, "interrupted", status=130, untouched=[figure], folders=[out])
+    assert listing(out) == before
+
+
 # -- --out never replaces a file of another kind -------------------------------------------------
 @pytest.mark.parametrize("command, name", [("ssp", "notes.txt"), ("container", "notes.txt"),
                                            ("ssp", "notes.ssp"), ("container", "notes.fmu")])

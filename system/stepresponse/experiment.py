@@ -921,11 +921,9 @@ def plot_comparison(comparison: Comparison, out_dir: str | Path, name: str | Non
     axes[-1].set_xlabel("t (s)")
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path = out / f"{name}.png"
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    from robofmu.system.plots import save_figure
+
+    return save_figure(fig, out / f"{name}.png", dpi=120)
 
 
 def demo_cases(robot: Robot, fmu_dir: str | Path, out_dir: str | Path, h: float = defaults.STEP_SIZE,

@@ -320,9 +320,9 @@ def plot(runs: Sequence[ConvergenceRun], path: str | Path, title: str = "") -> P
         ax.legend()
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    from robofmu.system.plots import save_figure
+
+    return save_figure(fig, path, tight=False, dpi=120)
 
 
 def check_plan(step_sizes: Sequence[float], algorithms: Sequence[str],

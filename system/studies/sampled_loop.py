@@ -25,7 +25,7 @@ from robofmu.system.analysis import markdown_table  # noqa: E402
 from robofmu.system.diagram import expand, parameter_address  # noqa: E402
 from robofmu.system.experiment import SAMPLE_TIME, load  # noqa: E402
 from robofmu.system.plan import described, start_values, variable_unit  # noqa: E402
-from robofmu.system.plots import _save  # noqa: E402
+from robofmu.system.plots import save_figure  # noqa: E402
 from robofmu.system.roles import Roles  # noqa: E402
 from robofmu.system.studies.plan import SampledLoopStudy  # noqa: E402
 from robofmu.system.sweep.design import Design, parse_axis  # noqa: E402
@@ -181,7 +181,7 @@ def figure(found: list[Case], path: Path, title: str) -> Path:
     axes[-1, 0].set_xticks(x, [f"{1 / t:g} Hz\nd = {d}" for t, d in groups])
     axes[0, 0].set_title(title)
     axes[-1, 0].legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.3))
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _value(case: Case | None, name: str) -> float:

@@ -546,10 +546,10 @@ def run(study: Study, joint_grids: list[int] | None = None, progress=lambda text
     return Workspace(study, length, centre, r, m, regions, joint, time.perf_counter() - start)
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig, path: Path, tight: bool = True) -> Path:
     from robofmu.system import plots
 
-    return plots._save(fig, path)
+    return plots.save_figure(fig, path, tight)
 
 
 def figures(ws: Workspace, out: Path) -> dict[str, Path]:
@@ -601,9 +601,7 @@ def figures(ws: Workspace, out: Path) -> dict[str, Path]:
         ax.set_ylabel("y (mm)")
         ax.set_title(f"Local isotropy 1/cond(J) {title}")
     fig.colorbar(im, ax=axes, label=f"1/cond(J), θ row × L = {ws.length:g} m", shrink=0.85)
-    fig.savefig(out / "isotropy.png", dpi=110)
-    plt.close(fig)
-    made["isotropy"] = out / "isotropy.png"
+    made["isotropy"] = _save(fig, out / "isotropy.png", tight=False)
 
     if ws.joint:
         fig, ax = plt.subplots(figsize=(6.4, 4.6))

@@ -31,7 +31,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator  # noqa: E402
 
-from robofmu.system.plots import _save  # noqa: E402
+from robofmu.system.plots import save_figure  # noqa: E402
 from robofmu.system.units import printed, small  # noqa: E402
 from robofmu.system.sweep.result import SweepRun  # noqa: E402
 
@@ -248,7 +248,7 @@ def metric_vs_parameter(run: SweepRun, metric: str, threshold: float | None = No
     axes[0, 0].set_title(f"{_title(run)}: {metric} against {axis.name} ({len(run.rows)} runs"
                          + (f", {failed} failed: red crosses" if failed else "") + ")", fontsize=10)
     axes[0, 0].legend(fontsize=8, loc="best")
-    return _save(fig, run.folder / "metric_vs_parameter.png")
+    return save_figure(fig, run.folder / "metric_vs_parameter.png")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -440,7 +440,7 @@ def heatmap(run: SweepRun, metric: str, threshold: float | None = None) -> Path:
     if handles:
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=len(handles),
                   fontsize=8, frameon=False)
-    return _save(fig, run.folder / "heatmap.png")
+    return save_figure(fig, run.folder / "heatmap.png")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -483,7 +483,7 @@ def histograms(run: SweepRun, metric: str, threshold: float | None = None) -> Pa
     failed = int(np.sum(~ok))
     fig.suptitle(f"{_title(run)}: {int(ok.sum())} ok runs" + (f" ({failed} failed, not counted)" if failed else ""),
                  fontsize=10)
-    return _save(fig, run.folder / "histograms.png")
+    return save_figure(fig, run.folder / "histograms.png")
 
 
 def scatter(run: SweepRun, metric: str, threshold: float | None = None) -> Path:
@@ -519,7 +519,7 @@ def scatter(run: SweepRun, metric: str, threshold: float | None = None) -> Path:
     failed = int(np.sum(~ok))
     fig.suptitle(f"{_title(run)}: {metric} against each varied quantity ({len(run.rows)} runs"
                  + (f", {failed} failed: red crosses" if failed else "") + ")", fontsize=10)
-    return _save(fig, run.folder / "scatter.png")
+    return save_figure(fig, run.folder / "scatter.png")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -595,7 +595,7 @@ def comparison_heatmaps(runs: list[tuple[str, SweepRun]], metric: str, threshold
         _overlay(axes[-1], runs, grids, level, text, metric)
     worst = f", the worst over {', '.join(grids[0].others)}" if grids[0].others else ""
     fig.suptitle(f"{metric} of {', '.join(label for label, _ in runs)}{worst}", fontsize=11)
-    return _save(fig, Path(path), tight=False)
+    return save_figure(fig, Path(path), tight=False)
 
 
 def _overlay(ax, runs: list, grids: list[Grid], level: float, text: str, metric: str) -> None:

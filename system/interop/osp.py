@@ -17,8 +17,8 @@ robofmu's (:func:`is_robofmu_osp`): libcosim validates the file against its sche
 no place for a tool's name.
 
 Times are written so that libcosim reads them exactly: it converts seconds to integer
-nanoseconds by truncation (``duration_cast``), so 0.0003 s (0.0003 x 1e9 = 299999.99999999994)
-would become 299999 ns; :func:`osp_seconds` writes the nearest double at or above the intended
+nanoseconds by truncation (``duration_cast``), so 0.00013 s (0.00013 x 1e9 = 129999.99999999999)
+would become 129999 ns; :func:`osp_seconds` writes the nearest double at or above the intended
 nanosecond count instead.
 
 What libcosim does with the rates (its ``fixed_step_algorithm``, the version libcosimpy 0.0.6

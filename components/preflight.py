@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import pinocchio as pin
 
 from .blocks import make_block
 from .blocks.ik import NO_RATE_LIMIT
@@ -43,6 +44,8 @@ ATTEMPTS = 4
 #: How far (rad or m) the reference's first joint positions may lie from home, where the plant
 #: starts at rest, before the loop would jump at t = 0.
 START_TOLERANCE = 1e-3
+#: Rotation (rad) about a frame axis the task leaves free below which a reference is taken not to turn about it.
+UNTRACKED_ROTATION = 1e-6
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,10 @@ class ReferenceCheck:
         The joint at ``speed_ratio`` ("" where no joint moves).
     fastest_time : float
         When (s).
+    untracked : tuple of (float, int, float) or None
+        For a pose task that leaves some of the frame's axes free (``orientation_axes``): the
+        largest rotation (rad) the reference asks about one of them, from its start, the axis
+        (0, 1, 2: the frame's x, y, z) and when (s); the IK does not track it. None otherwise.
     """
 
     samples: int
@@ -75,6 +82,7 @@ class ReferenceCheck:
     ik_residual: float | None
     fastest_joint: str = ""
     fastest_time: float = 0.0
+    untracked: tuple[float, int, float] | None = None
 
 
 class ReferenceRefused(ValueError):
@@ -91,6 +99,7 @@ class _Sampled:
     qd: np.ndarray                   # (k, n)
     residual: float | None
     failure: tuple[float, str, bool] | None   # (t, the IK block's reason, at a singularity)
+    untracked: tuple[float, int, float] | None = None   # (rad, free axis, t): see ReferenceCheck
 
 
 def check_references(description: RobotDescription, step_size: float = 1e-3) -> dict[str, ReferenceCheck]:
@@ -161,7 +170,7 @@ def check_reference(description: RobotDescription, step_size: float = 1e-3,
             + _slower(description, table, sampled.duration, ratio, speed, step_size))
     margin = float(np.min(np.minimum(sampled.q - lower, upper - sampled.q))) if len(sampled.times) else np.inf
     return ReferenceCheck(len(sampled.times), sampled.duration, margin, ratio, sampled.residual,
-                          robot.joint_names[j] if ratio > 0.0 else "", float(sampled.times[k]))
+                          robot.joint_names[j] if ratio > 0.0 else "", float(sampled.times[k]), sampled.untracked)
 
 
 def _sample(description: RobotDescription, step_size: float) -> _Sampled | None:
@@ -186,11 +195,21 @@ def _sample(description: RobotDescription, step_size: float) -> _Sampled | None:
     times = np.arange(0.0, duration + step_size / 2, step_size)
     q, qd = np.empty((len(times), n)), np.empty((len(times), n))
     residual, failure, solved = None, None, len(times)
+    free = [] if joint_space or "omega_ref[1]" not in trajectory.index else \
+        [a for a in range(3) if a not in trajectory.robot.orientation_axes]
+    turned, untracked = np.zeros(3), None        # rad about the frame's own axes, from the start
     for k, t in enumerate(times):
         trajectory.output(t)
         if joint_space:
             q[k], qd[k] = trajectory.get("q_ref"), trajectory.get("qd_ref")
             continue
+        if free:
+            x, y, z, w = trajectory.get("quat_ref")
+            body = pin.Quaternion(w, x, y, z).matrix().T @ np.asarray(trajectory.get("omega_ref"))
+            turned += body * (step_size if k else 0.0)
+            axis = max(free, key=lambda a: abs(turned[a]))
+            if abs(turned[axis]) > UNTRACKED_ROTATION and (untracked is None or abs(turned[axis]) > untracked[0]):
+                untracked = (float(abs(turned[axis])), axis, float(t))
         for name in shared:
             ik.set(name, trajectory.get(name))
         ik.output(t)
@@ -201,7 +220,7 @@ def _sample(description: RobotDescription, step_size: float) -> _Sampled | None:
         q[k], qd[k] = ik.get("q_ref"), ik.get("qd_ref")
         for name in residuals:
             residual = max(residual or 0.0, float(ik.get(name)))
-    return _Sampled(duration, times[:solved], q[:solved], qd[:solved], residual, failure)
+    return _Sampled(duration, times[:solved], q[:solved], qd[:solved], residual, failure, untracked)
 
 
 def _at_singularity(ik) -> bool:

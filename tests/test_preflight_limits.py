@@ -288,3 +288,30 @@ def test_an_accepted_path_reports_its_fastest_joint_and_when():
     found = check_reference(load_description("ur5"))
     assert found.speed_ratio == pytest.approx(ratios[k, j], rel=1e-9)
     assert found.fastest_joint == load_model("ur5").joint_names[j] and math.isclose(found.fastest_time, times[k])
+
+
+@pytest.mark.parametrize("axes, expected", [([0, 1], (0.5, 2)), ([1, 2], (0.3, 0)), ([0, 2], (0.2, 1)),
+                                            ([0, 1, 2], None)])
+def test_a_rotation_about_an_axis_the_task_leaves_free_is_told(copy_robot, axes, expected):
+    """The UR5's pose line turning tool0 by the rotation vector (0.3, 0.2, 0.5) rad about its own
+    axes (a slerp: the body angular velocity keeps that direction, so the turn about each axis is
+    that component): a task that leaves an axis free gets the largest such turn named, with its
+    axis, and ``robofmu build``'s check says so in a note; a full pose task has nothing to tell."""
+    from robofmu.system.packaging.build import checked
+
+    def edit(data):
+        set_key(data, "task.orientation_axes", axes)
+        set_key(data, "trajectory.rotation", [0.3, 0.2, 0.5])
+    described = read(copy_robot("ur5", edit))
+    found = check_reference(described)
+    lines = []
+    checked(described, log=lines.append)
+    if expected is None:
+        assert found.untracked is None and not any("note:" in line for line in lines)
+        return
+    angle, axis, when = found.untracked
+    assert axis == expected[1] and angle == pytest.approx(expected[0], abs=2e-3)
+    assert when == pytest.approx(2.0, abs=0.01)                  # it grows to the line's end
+    note = next(line for line in lines if "note:" in line)
+    assert (f"turns tool0 by up to {angle:.4g} rad about its own {'xyz'[axis]} axis" in note
+            and f"orientation_axes = {axes} leaves free" in note and f"add {axis} to orientation_axes" in note)

@@ -206,3 +206,10 @@ def checked(description, log=print) -> None:
         fastest = f" ({found.fastest_joint} at t = {found.fastest_time:.3g} s)" if found.fastest_joint else ""
         log(f"{description.name}: reference{which} checked over {found.duration:g} s ({found.samples} samples): "
             f"{margin}, at most {found.speed_ratio * 100:.0f} % of their velocity limits{fastest}{residual}")
+        if found.untracked is not None:
+            angle, axis, when = found.untracked
+            task = description.task
+            log(f"{description.name}: note: the reference{which} turns {task.frame} by up to {angle:.4g} rad about "
+                f"its own {'xyz'[axis]} axis (at t = {when:.4g} s), which [task] orientation_axes = "
+                f"{list(task.orientation_axes)} leaves free: the IK does not track that rotation (add {axis} to "
+                "orientation_axes to track it)")

@@ -335,3 +335,85 @@ def test_failed_initialization_aborts_the_process(fmu_dir, tmp_path):
                 "must be > 0") in proc.stderr         # the FMU's fmi2Error message
         assert "SURVIVED" not in proc.stdout
         assert list(tmp_path.glob("libcosim_*"))      # the leftover landed in TMPDIR, not /tmp
+
+
+# -- block rates through the OSP export (issue 30, point 1; system/interop/osp.py) ---------------
+def _slowed(fmu_root, name: str, slow: dict[str, float], delay: int, stop: float):
+    """Experiment ``name`` with the blocks of ``slow`` at their sample times (s) and the
+    controller's ``delay_steps``."""
+    from robofmu.system import experiment
+
+    system = experiment.load(name, fmu_dir=fmu_root)
+    for block, sample_time in slow.items():
+        system.block(block).sample_time = sample_time
+    system.block("controller").parameters["delay_steps"] = delay
+    system.stop_time = stop
+    return system
+
+
+EVERY_BLOCK_BUT_THE_PLANT = {"trajectory": 0.004, "ik": 0.004, "controller": 0.004, "fk": 0.004}
+
+
+@pytest.mark.parametrize("name, slow, delay, stop", [
+    ("chess-pd", {"controller": 0.004}, 0, 1.0),
+    ("chess-pd", {"controller": 0.003}, 2, 0.5),           # 500 base steps: no whole number of samples
+    ("ur5-pose", EVERY_BLOCK_BUT_THE_PLANT, 0, 0.5),       # make bench's multi-rate case
+], ids=["chess-pd-controller-4ms", "chess-pd-controller-3ms-d2", "ur5-pose-plant-1ms-rest-4ms"])
+def test_libcosim_runs_the_osp_export_at_its_rates_as_the_masters_jacobi_loop(fmu_root, tmp_path, name, slow,
+                                                                              delay, stop):
+    """libcosim's fixed-step algorithm with a step size per simulator (decimation) is the master's
+    Jacobi loop at the same rates: every Real output within 1e-12 of its range, at every base step."""
+    from robofmu.system.interop.osp import export_osp, run_osp_libcosim
+    from robofmu.system.master import Master
+
+    system = _slowed(fmu_root, name, slow, delay, stop)
+    result = run_osp_libcosim(export_osp(system, tmp_path / "osp"))
+    jacobi = Master(system).run(algorithm="jacobi")
+    assert jacobi.info["sample_times"] == {b.name: slow.get(b.name, system.step) for b in system.blocks}
+    np.testing.assert_allclose(result.time, jacobi.time, rtol=0, atol=1e-15)
+    assert len(result.columns) > 40 and set(result.columns) <= set(jacobi.columns)
+    for column in result.columns:
+        scale = max(1.0, np.ptp(jacobi[column]))
+        np.testing.assert_allclose(result[column], jacobi[column], rtol=0, atol=1e-12 * scale, err_msg=column)
+    # held between samples: the controller's effort changes only at its own samples
+    ratio = round(slow["controller"] / system.step)
+    tau = np.column_stack([result[c] for c in result.columns if c.startswith("controller.tau[")])
+    changes = np.flatnonzero(np.any(np.diff(tau, axis=0) != 0.0, axis=1)) + 1
+    assert len(changes) > 50 and not np.any(changes % ratio)
+    # the rates and the algorithm are what make it agree: Gauss-Seidel at the same rates, and
+    # Jacobi with every block at the base step, are both further off than the tolerance by far
+    seidel = Master(system).run(algorithm="gauss-seidel")
+    single = Master(_slowed(fmu_root, name, {}, delay, stop)).run(algorithm="jacobi")
+    for other in (seidel, single):
+        assert np.abs(other["plant.q[2]"] - result["plant.q[2]"]).max() > 1e-7
+
+
+@pytest.mark.parametrize("delay", [0, 1, 2])
+def test_libcosim_holds_a_slow_controllers_effort_one_sample_late(fmu_root, tmp_path, delay):
+    """libcosim transfers a decimated simulator's outputs when its step ends: the effort the
+    controller (every 4 ms) computes from the plant's state at t_k reaches the plant at t_k+4, and
+    is held over its next four steps (over the first sample, the effort of t_0, which
+    initialization passed along). That is the hand-written sampled loop of tests/test_multirate.py
+    (Pinocchio's CRBA and nonlinear effects for the law, RK4 on ABA at 1 ms for the plant) with
+    max(d, 1) samples of delay: the Jacobi exchange's own sample of delay and the controller's d
+    coincide for d = 1 (with d >= 1 its effort no longer depends on the inputs of its sample, so
+    reading it before they are set loses nothing). The reference q_ref, qd_ref, qdd_ref is libcosim's
+    own ik output (one base step late through each feedthrough block)."""
+    from test_multirate import _hand_loop
+
+    from robofmu.system.interop.osp import export_osp, run_osp_libcosim
+
+    system = _slowed(fmu_root, "chess-pd", {"controller": 0.004}, delay, 1.0)
+    result = run_osp_libcosim(export_osp(system, tmp_path / "osp"))
+    gains = system.block("controller").parameters
+    assert gains["ki"] == 0.0 and result.time.size == 1001
+    q, qd, tau = _hand_loop(result, gains["kp"], gains["kd"], max(delay, 1), 1000)
+    n = q.shape[1]
+    lc_tau = np.column_stack([result[f"controller.tau[{j + 1}]"] for j in range(n)])
+    np.testing.assert_allclose(lc_tau, tau, rtol=0, atol=1e-9 * np.abs(tau).max())
+    for j in range(n):
+        np.testing.assert_allclose(result[f"plant.q[{j + 1}]"], q[:, j], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(result[f"plant.qd[{j + 1}]"], qd[:, j], rtol=0, atol=1e-9)
+    # the delay is visible: the loop one sample sooner (the master's Gauss-Seidel, d = 0) is elsewhere
+    q_sooner, _, _ = _hand_loop(result, gains["kp"], gains["kd"], max(delay, 1) - 1, 1000)
+    assert np.abs(q_sooner - q).max() > 1e-7

@@ -30,6 +30,10 @@ Things libcosimpy 0.0.6 cannot do directly and how this file copes (see system/i
   back with the FMU's message: "plant: Model error: plant: input tau[2] = nan ...".
 - libcosim's fixed-step algorithm is a Jacobi scheme: connected values are transferred after each
   step, so every connection adds one step of delay (trajectory -> ik -> controller: two).
+- Block rates reach libcosim through the OSP export (``OspSystemStructure.xml``, a step size per
+  simulator; system/interop/osp.py): a simulator stepped every r base steps has its outputs
+  transferred when its step ends, which is the master's Jacobi loop at the same rates (tested to
+  1e-12) and a hand-written loop with one controller sample of delay.
 """
 from __future__ import annotations
 

@@ -21,8 +21,9 @@ nanoseconds by truncation (``duration_cast``), so 0.00013 s (0.00013 x 1e9 = 129
 would become 129999 ns; :func:`osp_seconds` writes the nearest double at or above the intended
 nanosecond count instead.
 
-What libcosim does with the rates (its ``fixed_step_algorithm``, the version libcosimpy 0.0.6
-bundles; tests/test_osp_export.py): a simulator's decimation factor is its ``stepSize`` over the
+What libcosim does with the rates (its ``fixed_step_algorithm.cpp``, as read in libcosim's
+source and as libcosimpy 0.0.6's library behaves in tests/test_libcosim.py): a simulator's
+decimation factor is its ``stepSize`` over the
 base step (integer division; robofmu writes whole multiples only). At base step k a simulator
 whose factor r divides k steps ``doStep(t_k, r h)``; after the base step, every simulator that
 has just finished its step (r divides k + 1) has its outputs transferred along each connection
@@ -33,9 +34,13 @@ and the effort it computes there reaches the plant at t_k+4, held for the plant'
 steps: one controller sample of delay (at initialization libcosim passes the values along
 until they are consistent, so over the first sample the plant gets the effort of t_0). That
 is, step for step, robofmu's master with ``algorithm = "jacobi"`` at the same rates (its due
-blocks' outputs read, then their inputs set, a block not due left alone): the test runs both on
-chess-pd with the controller at 4 ms and compares every recorded output to 1e-12. (The
-master's default, Gauss-Seidel, hands the controller's effort of t_k to the plant at t_k.)
+blocks' outputs read, then their inputs set, a block not due left alone): the tests run both
+(chess-pd with the controller at 4 ms or 3 ms, ur5-pose with all but the plant at 4 ms) and
+compare every recorded output to 1e-12, and compare libcosim with a hand-written sampled loop.
+(The master's default, Gauss-Seidel, hands the controller's effort of t_k to the plant at t_k.)
+A controller's ``delay_steps`` d adds to that sample only from d = 2 on: with d >= 1 its
+effort does not depend on the inputs of its own sample, so reading it before they are set
+(Jacobi) loses nothing, and d = 0 and d = 1 give the same run.
 """
 from __future__ import annotations
 

@@ -30,7 +30,7 @@ from typing import Callable, NamedTuple
 from robofmu.system.diagram import BlockSpec, System, coerce, expand, select, spread, unmatched
 
 __all__ = ["DiagramError", "Link", "Node", "Plan", "Times", "available_memory", "described", "gigabytes",
-           "plan", "single_rate", "start_values", "step_count", "times", "variable_unit"]
+           "memory_shortfall", "plan", "single_rate", "start_values", "step_count", "times", "variable_unit"]
 
 
 # -- times ---------------------------------------------------------------------------------------
@@ -152,13 +152,19 @@ def gigabytes(n: int) -> str:
             return f"{n / size:.3g} {unit}"
 
 
-def _memory_problem(n_steps: int, columns: int) -> str | None:
-    """Why (n + 1) rows x (columns + time) x 8 bytes would take more than half the memory available."""
-    need, free = (n_steps + 1) * (columns + 1) * 8, available_memory()
+def memory_shortfall(need: int) -> str | None:
+    """The one memory rule: None if ``need`` bytes fit in half the memory available (or it is
+    unknown), else "<need> of memory, more than half of the <available> available"."""
+    free = available_memory()
     if free is None or need <= free / 2:
         return None
-    return (f"{n_steps} steps x {columns} recorded signals need {gigabytes(need)} of memory, more "
-            f"than half of the {gigabytes(free)} available")
+    return f"{gigabytes(need)} of memory, more than half of the {gigabytes(free)} available"
+
+
+def _memory_problem(n_steps: int, columns: int) -> str | None:
+    """Why (n + 1) rows x (columns + time) x 8 bytes would not fit (:func:`memory_shortfall`)."""
+    shortfall = memory_shortfall((n_steps + 1) * (columns + 1) * 8)
+    return None if shortfall is None else f"{n_steps} steps x {columns} recorded signals need {shortfall}"
 
 
 class DiagramError(ValueError):

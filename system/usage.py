@@ -289,15 +289,14 @@ def check_replaceable(path: str | Path, option: str, owned: Callable[[Path], boo
 
 def check_memory(need: int, where: str, fix: str) -> None:
     """Refuse (:class:`UsageError`) an allocation of ``need`` bytes that would take more than half
-    the memory available (:func:`robofmu.system.plan.available_memory`), the rule ``robofmu run``
+    the memory available (:func:`robofmu.system.plan.memory_shortfall`), the rule ``robofmu run``
     applies to its recording; the message names ``where`` (the option or file and key) and says
     what to do (``fix``)."""
-    from robofmu.system.plan import available_memory, gigabytes
+    from robofmu.system.plan import memory_shortfall
 
-    free = available_memory()
-    if free is not None and need > free / 2:
-        raise UsageError(f"{where}: needs {gigabytes(need)} of memory, more than half of the {gigabytes(free)} "
-                         f"available; {fix}")
+    shortfall = memory_shortfall(need)
+    if shortfall is not None:
+        raise UsageError(f"{where}: needs {shortfall}; {fix}")
 
 
 def check_times(step: float | None, stop_time: float | None) -> None:

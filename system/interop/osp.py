@@ -23,24 +23,24 @@ nanosecond count instead.
 
 What libcosim does with the rates (its ``fixed_step_algorithm.cpp``, as read in libcosim's
 source and as libcosimpy 0.0.6's library behaves in tests/test_libcosim.py): a simulator's
-decimation factor is its ``stepSize`` over the
-base step (integer division; robofmu writes whole multiples only). At base step k a simulator
-whose factor r divides k steps ``doStep(t_k, r h)``; after the base step, every simulator that
-has just finished its step (r divides k + 1) has its outputs transferred along each connection
-whose two ends' factors both divide k + 1, and a value set on a simulator reaches its FMU just
-before its next step. Outputs are read after each step and transferred after it: libcosim is
-Jacobi, at every rate. So a controller at 4 ms samples the plant's outputs at t_k (k = 0, 4, ..),
-and the effort it computes there reaches the plant at t_k+4, held for the plant's next four
-steps: one controller sample of delay (at initialization libcosim passes the values along
-until they are consistent, so over the first sample the plant gets the effort of t_0). That
-is, step for step, robofmu's master with ``algorithm = "jacobi"`` at the same rates (its due
-blocks' outputs read, then their inputs set, a block not due left alone): the tests run both
-(chess-pd with the controller at 4 ms or 3 ms, ur5-pose with all but the plant at 4 ms) and
-compare every recorded output to 1e-12, and compare libcosim with a hand-written sampled loop.
-(The master's default, Gauss-Seidel, hands the controller's effort of t_k to the plant at t_k.)
-A controller's ``delay_steps`` d adds to that sample only from d = 2 on: with d >= 1 its
-effort does not depend on the inputs of its own sample, so reading it before they are set
-(Jacobi) loses nothing, and d = 0 and d = 1 give the same run.
+decimation factor is its ``stepSize`` over the base step (integer division; robofmu writes whole
+multiples only). At base step k a simulator whose factor r divides k steps ``doStep(t_k, r h)``;
+after the base step, every simulator that has just finished its step (r divides k + 1) has its
+outputs transferred (libcosim's current source only along connections whose two ends' factors
+both divide k + 1: the same values arrive), and a value set on a simulator reaches its FMU only
+just before its next step. Outputs are read after each step and transferred after it: libcosim
+is Jacobi, at every rate. So a controller at 4 ms samples the plant's outputs at t_k (k = 0, 4,
+..), and the effort it computes there reaches the plant at t_k+4, held for the plant's next four
+steps: one controller sample of delay (at initialization libcosim passes the values along until
+they are consistent, so over the first sample the plant gets the effort of t_0). That is, step
+for step, robofmu's master with ``algorithm = "jacobi"`` at the same rates (its due blocks'
+outputs read, then their inputs set, a block not due left alone): the tests run both (chess-pd
+with the controller at 4 ms or 3 ms, ur5-pose with all but the plant at 4 ms) and compare every
+recorded output to 1e-12, and compare libcosim with a hand-written sampled loop. (The master's
+default, Gauss-Seidel, hands the controller's effort of t_k to the plant at t_k.) A controller's
+``delay_steps`` d adds to that sample only from d = 2 on: with d >= 1 its effort does not depend
+on the inputs of its own sample, so reading it before they are set (Jacobi) loses nothing, and
+d = 0 and d = 1 give the same run.
 """
 from __future__ import annotations
 

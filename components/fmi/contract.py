@@ -97,15 +97,15 @@ class FastShared(ctypes.Structure):
 #: The library's registration function, which the slave calls (ctypes) at the end of its
 #: construction inside fmi2Instantiate; it returns 1 (C ``int``) if it registered the slave.
 REGISTER = "robofmu_fast_register"
-#: Its parameters: ``(name, ctypes type the slave passes, C type)``. The two last are NumPy's
-#: error-state context variable and the value to set in it, as addresses (NULL: none).
+#: Its parameters: ``(name, ctypes type the slave passes, C type)``. The last is the context
+#: (``contextvars.Context``) in which NumPy ignores floating-point errors, which the library
+#: enters around each call, as an address (NULL: none).
 REGISTER_PARAMETERS = (
     ("shared", ctypes.c_void_p, "FastShared*"),
     ("refresh", ctypes.py_object, "PyObject*"),
     ("step", ctypes.py_object, "PyObject*"),
     ("nonfinite", ctypes.py_object, "PyObject*"),
-    ("quiet_var", ctypes.c_void_p, "PyObject*"),
-    ("quiet_value", ctypes.c_void_p, "PyObject*"),
+    ("quiet", ctypes.c_void_p, "PyObject*"),
 )
 
 #: The constants above that the C libraries use, by the same names (the header's macros).

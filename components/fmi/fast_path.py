@@ -5,8 +5,8 @@ Behind robofmu's export library the slave, once constructed, registers with it
 which masks of slots are Real / Boolean / Real inputs / Real outputs, the flags
 ``_initialized``/``_terminated``, ``_dirty`` and ``_inputs_checked`` as shared fields, an
 array for the values saved before a refresh, and :meth:`FastPath._fast_refresh`,
-:meth:`FastPath._fast_step`, :meth:`FastPath._fast_nonfinite`, with NumPy's error state,
-:data:`.quiet.ERROR_STATE`). While initialized, that library then serves fmi2SetReal of
+:meth:`FastPath._fast_step`, :meth:`FastPath._fast_nonfinite`, with a context in which
+NumPy ignores floating-point errors, :func:`.quiet.quiet_context`). While initialized, that library then serves fmi2SetReal of
 inputs, fmi2GetReal / fmi2GetBoolean and fmi2DoStep itself, calling only those methods (the
 header comment of ``robofmu_fmi2.c``, point 4); all other calls still come to the slave
 through pythonfmu. So ``values`` is never rebound.
@@ -25,7 +25,7 @@ import numpy as np
 
 from .contract import (FAST_CALLS, FAST_CHECK, FAST_GET_REAL, FAST_MESSAGES, FAST_OK, FAST_VERSION, PLATFORM,
                        REGISTER, REGISTER_PARAMETERS, STOCK_LIBRARY, FastShared)
-from .quiet import ERROR_STATE, quietly
+from .quiet import quiet_context, quietly
 
 __all__ = ["FastPath"]
 
@@ -90,7 +90,7 @@ class FastPath:
         shared.n = values.size
         shared.get_real, shared.get_boolean, shared.set_real, shared.output = (m.ctypes.data for m in self._fast_masks)
         shared.saved = self._saved.ctypes.data
-        quiet_var, quiet_value = ERROR_STATE if ERROR_STATE is not None else (None, None)
+        self._quiet = quiet_context()     # alive as long as the slave: the library holds its address
         folder = Path(self.resources).parent / "binaries" / PLATFORM
         for path in sorted(folder.glob("*.so")):
             if path.name == STOCK_LIBRARY:
@@ -105,11 +105,10 @@ class FastPath:
                     continue
                 register.restype = ctypes.c_int
                 register.argtypes = [ctype for _, ctype, _ in REGISTER_PARAMETERS]
-                # NumPy's error state as the objects' addresses (None: NULL); alive as module globals
+                # the quiet context as its address (None: NULL)
                 if register(ctypes.addressof(shared), self._fast_refresh, self._fast_step, self._fast_nonfinite,
-                            None if quiet_var is None else id(quiet_var),
-                            None if quiet_value is None else id(quiet_value)) == 1:
-                    if quiet_var is not None:       # the library sets NumPy's error state around each call
+                            None if self._quiet is None else id(self._quiet)) == 1:
+                    if self._quiet is not None:     # the library enters it around each call
                         self._output_now, self._advance_now = self.logic.output, self.logic.advance
                     return True
             finally:
@@ -117,8 +116,8 @@ class FastPath:
         return False
 
     # The three callables the library calls (the slave initialized and not terminated). It has
-    # saved the values into _saved before a refresh and set NumPy's error state, as quietly()
-    # does, around each call. The usual case takes the shortest way; any other goes the way
+    # saved the values into _saved before a refresh and entered the quiet context (NumPy's
+    # error state as quietly() sets it) around each call. The usual case takes the shortest way; any other goes the way
     # of the FMI method (get_real's refresh, do_step), which decides and reports.
     def _fast_refresh(self) -> int:
         """refresh(): the outputs brought up to date as fmi2GetReal / fmi2GetBoolean
@@ -159,7 +158,10 @@ class FastPath:
         return (done | FAST_MESSAGES) if self.log_queue else done
 
     def _fast_step(self, current_time: float, step_size: float) -> int:
-        """step(t, h): :meth:`do_step`; returns as :meth:`_fast_refresh`."""
+        """step(t, h): :meth:`do_step`; returns as :meth:`_fast_refresh`. A block without
+        feedthrough (its outputs depend on its state and time only) computes its outputs at
+        t + h in the same call (:meth:`_fast_outputs`): the read that follows need not enter
+        Python again."""
         shared = self._shared
         try:
             if (shared.inputs_checked and self._bad_output is None          # the usual case of do_step
@@ -173,10 +175,23 @@ class FastPath:
                     self.time = current_time + step_size
                     self._held_warned = False
                     shared.dirty = 1
-                    done = FAST_OK
+                    done = FAST_OK if self._feedthrough else self._fast_outputs()
             else:
                 done = FAST_OK if self._do_step(current_time, step_size) else 0
         except BaseException as exc:    # do_step catches every Exception; this the rest
             self._report_failure(exc, "fmi2DoStep")
             done = 0
         return (done | FAST_MESSAGES) if self.log_queue else done
+
+    def _fast_outputs(self) -> int:
+        """After a step of a block without feedthrough: its outputs at the new time, FAST_OK |
+        FAST_CHECK (the library checks them; finite: they are current). If the block raises,
+        the outputs the library saved before the step are back and they stay stale: the read
+        that follows computes them again and reports as :meth:`_fast_refresh` does."""
+        try:
+            self._output_now(self.time)
+        except Exception:
+            slots = self._output_slots
+            self.values[slots] = self._saved[slots]
+            return FAST_OK
+        return FAST_OK | FAST_CHECK

@@ -5,10 +5,13 @@ error message (the wrapper checks every output), not as a RuntimeWarning printed
 ``numpy.errstate`` does that but builds its state anew at every entry (about 2 µs, twice per
 block-step); :func:`quietly` sets the same state, built once, on NumPy's error-state context
 variable (NumPy >= 2: ``numpy._core._ufunc_config``) and falls back to ``numpy.errstate`` where
-that is not found. :data:`ERROR_STATE` hands the same two objects to C code that does the same
-around its calls into Python (robofmu's FMI export library, on its fast path).
+that is not found. :func:`quiet_context` makes a context in which that state holds, for C code
+that enters it around its calls into Python (robofmu's FMI export library, on its fast path):
+entering a context allocates nothing, setting the variable makes a new mapping and a token.
 """
 from __future__ import annotations
+
+import contextvars
 
 import numpy as np
 
@@ -18,9 +21,16 @@ try:
 except (ImportError, AttributeError, TypeError):        # another NumPy: the public way
     _extobj_contextvar = _IGNORE = None
 
-#: ``(context variable, value)``: setting the value in the variable (``ContextVar.set``, then
-#: ``reset`` with its token) is :func:`quietly`; None where this NumPy has no such variable.
-ERROR_STATE = None if _extobj_contextvar is None else (_extobj_contextvar, _IGNORE)
+
+def quiet_context() -> contextvars.Context | None:
+    """A copy of the current context with NumPy's floating-point errors ignored (what
+    :func:`quietly` sets), for code that runs calls in it; None where this NumPy has no
+    error-state context variable."""
+    if _extobj_contextvar is None:
+        return None
+    context = contextvars.copy_context()
+    context.run(_extobj_contextvar.set, _IGNORE)
+    return context
 
 
 def quietly(function, *args):

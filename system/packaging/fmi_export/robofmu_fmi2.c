@@ -50,9 +50,12 @@
       callables, refresh() (bring the outputs up to date, as its get_real does when stale),
       step(t, h) (its do_step) and nonfinite() (hold the saved outputs and report), which catch
       every exception and return 1 if they succeeded, +2 if messages wait in its log queue (+4
-      from refresh(): outputs computed, their check left to this layer), and NumPy's
-      error-state context variable with the value "ignore", set around every one of those
-      calls (PyContextVar_Set, then _Reset: what the slave's quietly() does, once per call). A registration outside this library's fmi2Instantiate
+      from refresh() or step(): outputs computed, their check left to this layer), and a
+      context (contextvars.Context, a copy of the host's at registration) in which NumPy's
+      error state is "ignore", entered around every one of those calls (PyContext_Enter, then
+      _Exit: what the slave's quietly() does, without the new mapping and token that setting
+      the variable in the host's context makes at every call; the slave's Python code runs in
+      its own context). A registration outside this library's fmi2Instantiate
       (or fmi2Reset) in the same thread is refused, so is one with another struct version or
       size, or where a Python C-API function below cannot be found (dlsym(RTLD_DEFAULT): the
       functions pythonfmu's library binds to; nothing links libpython), or with the
@@ -69,7 +72,11 @@
         stale), else nonfinite() is called; then the values are copied (a Boolean is value !=
         0.0); if refresh() failed, zeros / false, as the slave's get_real does;
       - fmi2DoStep calls step(t, h); a refused step is fmi2Discard from pythonfmu, so it is
-        here, raised to the logged status (fmi2Error: point 1). The status pythonfmu's
+        here, raised to the logged status (fmi2Error: point 1). The values are saved first:
+        a block without feedthrough computes its outputs at t + h in step() (+4), checked
+        here as after refresh(): all finite, they are current, so the read that follows
+        enters no Python; else the saved outputs are back and stale (the read computes them
+        again and reports). The status pythonfmu's
         fmi2GetRealStatus (fmi2LastSuccessfulTime) and fmi2GetBooleanStatus (fmi2Terminated)
         would give after it are kept here and answered.
       When the slave says messages wait, this layer calls pythonfmu's fmi2GetString with no
@@ -254,13 +261,14 @@ typedef int PyGILState;                     /* PyGILState_STATE, an enum */
 #define PYTHON_FUNCTIONS(X) \
     X(PyGILState, PyGILState_Ensure, (void)) \
     X(void, PyGILState_Release, (PyGILState)) \
-    X(PyObject*, PyObject_CallObject, (PyObject*, PyObject*)) \
-    X(PyObject*, PyObject_CallFunction, (PyObject*, const char*, ...)) \
+    X(PyObject*, PyObject_CallNoArgs, (PyObject*)) \
+    X(PyObject*, PyObject_Vectorcall, (PyObject*, PyObject* const*, size_t, PyObject*)) \
+    X(PyObject*, PyFloat_FromDouble, (double)) \
     X(long, PyLong_AsLong, (PyObject*)) \
     X(PyObject*, PyErr_Occurred, (void)) \
     X(void, PyErr_Clear, (void)) \
-    X(PyObject*, PyContextVar_Set, (PyObject*, PyObject*)) \
-    X(int, PyContextVar_Reset, (PyObject*, PyObject*)) \
+    X(int, PyContext_Enter, (PyObject*)) \
+    X(int, PyContext_Exit, (PyObject*)) \
     X(void, Py_IncRef, (PyObject*)) \
     X(void, Py_DecRef, (PyObject*))
 
@@ -296,11 +304,10 @@ typedef struct {
     PyObject* refresh;                      /* new references */
     PyObject* step;
     PyObject* nonfinite;
-    PyObject* quiet_var;                    /* NULL, or NumPy's error-state context variable */
-    PyObject* quiet_value;                  /* and the state "ignore all" to set in it */
+    PyObject* quiet;                        /* NULL, or the slave's context: NumPy's errors ignored */
 } Fast;
 
-#define FAST_NONE {NULL, NULL, NULL, NULL, NULL, NULL}
+#define FAST_NONE {NULL, NULL, NULL, NULL, NULL}
 
 /* The registration slot of the fmi2Instantiate (or fmi2Reset) under way in this thread. */
 static __thread Fast* registering = NULL;
@@ -316,14 +323,14 @@ static __thread Fast* registering = NULL;
     } while (0)
 
 /* Called by robofmu's slave at the end of its construction (ctypes); 1 if registered.
-   quiet_var and quiet_value: both NULL, or NumPy's error-state context variable and the state
-   to set in it around every call of refresh(), step() and nonfinite() (set, then reset). */
+   quiet: NULL, or a context (contextvars.Context) whose NumPy error state is "ignore", entered
+   around every call of refresh(), step() and nonfinite() (PyContext_Enter, then _Exit). */
 EXPORT int robofmu_fast_register(FastShared* shared, PyObject* refresh, PyObject* step,
-                                 PyObject* nonfinite, PyObject* quiet_var, PyObject* quiet_value)
+                                 PyObject* nonfinite, PyObject* quiet)
 {
     Fast* slot = registering;
     if (slot == NULL || slot->shared != NULL || shared == NULL || refresh == NULL || step == NULL
-        || nonfinite == NULL || (quiet_var == NULL) != (quiet_value == NULL))
+        || nonfinite == NULL)
         return 0;
     if (shared->version != FAST_VERSION || shared->size != sizeof *shared
         || (shared->n > 0 && (shared->values == NULL || shared->get_real == NULL
@@ -337,17 +344,13 @@ EXPORT int robofmu_fast_register(FastShared* shared, PyObject* refresh, PyObject
     py.Py_IncRef(refresh);
     py.Py_IncRef(step);
     py.Py_IncRef(nonfinite);
-    if (quiet_var != NULL) {
-        py.Py_IncRef(quiet_var);
-        py.Py_IncRef(quiet_value);
-    }
+    if (quiet != NULL) py.Py_IncRef(quiet);
     py.PyGILState_Release(gil);
     slot->shared = shared;
     slot->refresh = refresh;
     slot->step = step;
     slot->nonfinite = nonfinite;
-    slot->quiet_var = quiet_var;
-    slot->quiet_value = quiet_value;
+    slot->quiet = quiet;
     return 1;
 }
 
@@ -358,10 +361,7 @@ static void fast_release(Fast* fast)
     py.Py_DecRef(fast->refresh);
     py.Py_DecRef(fast->step);
     py.Py_DecRef(fast->nonfinite);
-    if (fast->quiet_var != NULL) {
-        py.Py_DecRef(fast->quiet_var);
-        py.Py_DecRef(fast->quiet_value);
-    }
+    if (fast->quiet != NULL) py.Py_DecRef(fast->quiet);
     py.PyGILState_Release(gil);
     *fast = (Fast)FAST_NONE;
 }
@@ -518,20 +518,36 @@ static int fast_done(Instance* in, int bits, const char* call)
 }
 
 /* NumPy's floating-point errors ignored around a call into the slave (what its
-   components/fmi/quiet.py does, done here once per call): the token to hand to quiet_end. */
-static PyObject* quiet_begin(const Fast* fast)
+   components/fmi/quiet.py does): the slave's own context entered, no allocation (setting the
+   error state in the caller's context makes a new mapping and a token every time). 1 if the
+   call may go ahead (entered, or no context: the slave quiets its calls itself); 0 if the
+   context could not be entered (already entered: a call into this instance from its own
+   Python code), the reason logged. */
+static int quiet_begin(Instance* in, const char* call)
 {
-    if (fast->quiet_var == NULL) return NULL;
-    PyObject* token = py.PyContextVar_Set(fast->quiet_var, fast->quiet_value);
-    if (token == NULL) py.PyErr_Clear();    /* the slave's own fallback (numpy.errstate) still holds */
-    return token;
+    if (in->fast.quiet == NULL || py.PyContext_Enter(in->fast.quiet) == 0) return 1;
+    py.PyErr_Clear();
+    char text[512];
+    snprintf(text, sizeof text, "%.200s: %s refused: the instance's Python context is already entered "
+             "(a call into this instance during one of its own calls?)", in->name ? in->name : "", call);
+    filter(in, in->name, fmi2Error, STATUS_CATEGORY, text);
+    return 0;
 }
 
-static void quiet_end(const Fast* fast, PyObject* token)
+static void quiet_end(const Fast* fast)
 {
-    if (token == NULL) return;
-    if (py.PyContextVar_Reset(fast->quiet_var, token) != 0) py.PyErr_Clear();
-    py.Py_DecRef(token);
+    if (fast->quiet != NULL && py.PyContext_Exit(fast->quiet) != 0) py.PyErr_Clear();
+}
+
+/* step(t, h) (a new reference or NULL), with the GIL held. */
+static PyObject* fast_step(PyObject* step, double t, double h)
+{
+    PyObject* args[2] = {py.PyFloat_FromDouble(t), py.PyFloat_FromDouble(h)};
+    PyObject* result = NULL;
+    if (args[0] != NULL && args[1] != NULL) result = py.PyObject_Vectorcall(step, args, 2, NULL);
+    if (args[0] != NULL) py.Py_DecRef(args[0]);
+    if (args[1] != NULL) py.Py_DecRef(args[1]);
+    return result;
 }
 
 static int outputs_finite(const FastShared* shared)
@@ -547,6 +563,14 @@ static int outputs_finite(const FastShared* shared)
     return 1;
 }
 
+/* The outputs as saved before a step that computed non-finite ones. */
+static void restore_outputs(FastShared* shared)
+{
+    for (size_t k = 0; k < shared->n; ++k) {
+        if (shared->output[k]) shared->values[k] = shared->saved[k];
+    }
+}
+
 /* Outputs up to date before they are read: 1, or 0 if refresh() failed (read zeros).
    The values are saved first; if refresh() says FAST_CHECK (it computed the outputs and left
    the check to this layer) and an output is not finite, nonfinite() holds the saved ones and
@@ -557,20 +581,23 @@ static int fast_refresh(Instance* in, int call)
     if (!shared->dirty) return 1;
     shared->call = call;
     memcpy(shared->saved, shared->values, shared->n * sizeof *shared->values);
+    const char* name = call == FAST_GET_REAL ? "fmi2GetReal" : "fmi2GetBoolean";
     PyGILState gil = py.PyGILState_Ensure();
-    PyObject* token = quiet_begin(&in->fast);
-    int bits = fast_result(py.PyObject_CallObject(in->fast.refresh, NULL));
-    if (bits > 0 && (bits & FAST_CHECK)) {
-        if (outputs_finite(shared)) {
-            shared->dirty = 0;
-        } else {
-            int more = fast_result(py.PyObject_CallObject(in->fast.nonfinite, NULL));
-            bits = more < 0 ? more : (more | (bits & FAST_MESSAGES));
+    int bits = 0;
+    if (quiet_begin(in, name)) {
+        bits = fast_result(py.PyObject_CallNoArgs(in->fast.refresh));
+        if (bits > 0 && (bits & FAST_CHECK)) {
+            if (outputs_finite(shared)) {
+                shared->dirty = 0;
+            } else {
+                int more = fast_result(py.PyObject_CallNoArgs(in->fast.nonfinite));
+                bits = more < 0 ? more : (more | (bits & FAST_MESSAGES));
+            }
         }
+        quiet_end(&in->fast);
     }
-    quiet_end(&in->fast, token);
     py.PyGILState_Release(gil);
-    return fast_done(in, bits, call == FAST_GET_REAL ? "fmi2GetReal" : "fmi2GetBoolean");
+    return fast_done(in, bits, name);
 }
 
 /* pythonfmu's fmi2DoStep keeps these from the slave's answer: kept here for every step. */
@@ -1112,12 +1139,19 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint
     if (fast_on(in)) {
         in->fast_calls++;
         in->fast_stepped = 1;
+        FastShared* shared = in->fast.shared;
+        memcpy(shared->saved, shared->values, shared->n * sizeof *shared->values);
         PyGILState gil = py.PyGILState_Ensure();
-        PyObject* token = quiet_begin(&in->fast);
-        int bits = fast_result(py.PyObject_CallFunction(in->fast.step, "dd", currentCommunicationPoint,
-                                                        communicationStepSize));
-        quiet_end(&in->fast, token);
+        int bits = 0;
+        if (quiet_begin(in, "fmi2DoStep")) {
+            bits = fast_result(fast_step(in->fast.step, currentCommunicationPoint, communicationStepSize));
+            quiet_end(&in->fast);
+        }
         py.PyGILState_Release(gil);
+        if (bits > 0 && (bits & FAST_CHECK)) {     /* outputs computed at t + h (no feedthrough) */
+            if (outputs_finite(shared)) shared->dirty = 0;
+            else restore_outputs(shared);          /* stale: the read computes and reports them */
+        }
         s = fast_done(in, bits, "fmi2DoStep") ? fmi2OK : fmi2Discard;   /* pythonfmu's statuses */
     } else {
         s = stock.fmi2DoStep(in->stock, currentCommunicationPoint, communicationStepSize,

@@ -203,7 +203,7 @@ def single_rate(system: System, format_: str) -> None:
     if slow:
         named = ", ".join(f"{name} every {r * system.step:g} s" for name, r in slow.items())
         raise ValueError(f"{system.name}: multi-rate ({named}, the rest every {system.step:g} s): {format_} has "
-                         "no standard rate per component, and robofmu exports single-rate experiments only")
+                         "no standard rate per component: robofmu exports it single-rate only (`robofmu osp` carries the rates)")
 
 
 # -- facts of a model description ------------------------------------------------------------------

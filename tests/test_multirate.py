@@ -183,7 +183,7 @@ def test_exports_refuse_a_multirate_experiment_in_one_line(fmu_root, tmp_path):
 
     system = _multirate(fmu_root)
     said = ("chess-pd: multi-rate (controller every 0.004 s, the rest every 0.001 s): {} has no standard rate "
-            "per component, and robofmu exports single-rate experiments only")
+            "per component: robofmu exports it single-rate only (`robofmu osp` carries the rates)")
     with pytest.raises(ValueError) as info:
         export_ssp(system, tmp_path / "x.ssp")
     assert str(info.value) == said.format("SSP")

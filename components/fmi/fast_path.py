@@ -136,7 +136,8 @@ class FastPath:
                     self._output_failed(exc, self._saved[self._output_slots])
                     done = FAST_OK
                 else:
-                    self._bad_output = None
+                    if self._bad_output is not None:      # a read costs less than a write here
+                        self._bad_output = None
                     done = FAST_OK | FAST_CHECK
             else:
                 self._refresh()
@@ -173,7 +174,8 @@ class FastPath:
                     done = FAST_OK if self._step_failed(exc, current_time) else 0
                 else:
                     self.time = current_time + step_size
-                    self._held_warned = False
+                    if self._held_warned:
+                        self._held_warned = False
                     shared.dirty = 1
                     done = FAST_OK if self._feedthrough else self._fast_outputs()
             else:

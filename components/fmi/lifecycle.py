@@ -80,7 +80,8 @@ class LifeCycle:
     def _at_own_time(self, t: float) -> bool:
         """Whether a step from ``t`` continues from the instance's time (to 1e-9 s, relative
         beyond 1 s; False for a non-finite ``t``)."""
-        return abs(t - self.time) <= 1e-9 * max(1.0, abs(self.time))
+        scale = abs(self.time)          # max(1.0, |time|) without builtin max's call (hot path)
+        return abs(t - self.time) <= 1e-9 * (scale if scale > 1.0 else 1.0)
 
     def _step_problem(self, current_time: float, step_size: float) -> str | None:
         """Why ``fmi2DoStep(current_time, step_size)`` cannot run now, or None."""

@@ -163,6 +163,65 @@ def test_a_twin_without_the_fast_path_gives_the_same_bits_statuses_and_messages(
     assert fast.fast_calls > 150 and slow.fast_calls == 0
 
 
+def slave_of(name: str) -> BlockSlave:
+    """The slave a robofmu FMU instantiated in this process under ``name`` (one interpreter)."""
+    import gc
+    (slave,) = [o for o in gc.get_objects() if isinstance(o, BlockSlave) and o.instance_name == name]
+    return slave
+
+
+@pytest.mark.parametrize("failure", ["raises", "not finite"])
+def test_a_block_without_feedthrough_whose_outputs_fail_after_its_step_reports_as_its_twin(fmu_root, raw, failure):
+    """The plant (no feedthrough) computes its outputs at t + h inside its fast step; when that
+    raises or gives a non-finite output, the saved outputs come back and the read that follows
+    evaluates and reports them: the same statuses, values and messages as the twin, which
+    evaluates them only at the read. Then both recover alike."""
+    path = fmu_root / "rrp" / "plant.fmu"
+    names = {True: f"fast {failure}", False: f"slow {failure}"}
+    fast, slow = raw(path, names[True], fast=True), raw(path, names[False], fast=False)
+    for r in (fast, slow):
+        assert r.initialize() == OK, r.messages
+    inputs, reals = fast.names("Real", "input"), fast.names("Real")
+    values = starts(fast, inputs) + 0.5
+    slaves = {id(fast): slave_of(names[True]), id(slow): slave_of(names[False])}
+    originals = {}
+
+    def broken(slave):
+        original = slave.logic.output
+
+        def output(t):
+            if failure == "raises":
+                raise RuntimeError("the model broke")
+            original(t)
+            slave.values[slave._output_slots[0]] = float("nan")
+        return original, output
+
+    results = {id(fast): [], id(slow): []}
+    t = {id(fast): 0.0, id(slow): 0.0}
+    for k in range(7):
+        for r in (fast, slow):
+            slave = slaves[id(r)]
+            if k == 2:
+                originals[id(r)], output = broken(slave)
+                slave.logic.output, slave._output_now = output, output
+            if k == 4:
+                slave.logic.output = slave._output_now = originals[id(r)]
+                del slave.logic.output                         # the class's method again
+            got = [r.set_real(inputs, values), r.step(t[id(r)])]
+            t[id(r)] += H if got[1] == OK else 0.0
+            status, read = r.get_real(reals)
+            results[id(r)].append((got, status, bits(read)))
+    for (fgot, fstatus, fbits), (sgot, sstatus, sbits) in zip(results[id(fast)], results[id(slow)]):
+        assert fgot == sgot and fstatus == sstatus and np.array_equal(fbits, sbits)
+    unnamed = lambda r, who: [(st, c, m.replace(names[who], "plant")) for st, c, m in frames_dropped(r.messages)]
+    assert unnamed(fast, True) == unnamed(slow, False)
+    said = "the model broke" if failure == "raises" else "not finite"
+    assert any(s == "ERROR" and said in m for s, _, m in fast.messages), fast.messages
+    steps = [got[1] for got, _, _ in results[id(fast)]]
+    assert steps[:2] == [OK, OK] and ERROR in steps[2:4] and steps[-1] == OK, steps     # refused, then recovered
+    assert fast.fast_calls > 0 and slow.fast_calls == 0
+
+
 @pytest.mark.parametrize("robot, block", WITH_BOOLEANS)
 def test_a_boolean_get(fmu_root, raw, robot, block):
     r = raw(fmu_root / robot / f"{block}.fmu")

@@ -30,6 +30,7 @@ import fmpy
 import numpy as np
 from fmpy.fmi2 import fmi2Boolean, fmi2Component, fmi2Real, fmi2Status, fmi2True, fmi2ValueReference
 
+from robofmu.system.call_list import Batch, Record
 from robofmu.system.plan import Link
 from robofmu.system.fmu import status_name
 
@@ -39,11 +40,13 @@ __all__ = ["Call", "Failure", "Fmi2Functions", "Inputs", "Port", "Ports", "faile
 #: The C type of a port's values by its buffer's dtype (fmi2Real: float64; fmi2Boolean: int32).
 _CTYPES = {np.dtype(np.float64): fmi2Real, np.dtype(np.int32): fmi2Boolean}
 
-#: One call of the loop: ``(function, arguments, block, call)``. ``function(*arguments)`` returns
-#: the fmi2Status as an int (a ctypes function with its converted arguments, or a Python function
-#: of none that makes the call, or returns fmi2OK when there is nothing to set); ``block`` (the
-#: instance) and ``call`` (``"fmi2GetReal"``) name the :class:`Failure`. A plain tuple: the loop
-#: unpacks it in one bytecode.
+#: One call of the loop: ``(function, arguments, block, call, record)``. ``function(*arguments)``
+#: returns the fmi2Status as an int (a ctypes function with its converted arguments, or a Python
+#: function of none that makes the call, or returns fmi2OK when there is nothing to set); ``block``
+#: (the instance) and ``call`` (``"fmi2GetReal"``) name the :class:`Failure`; ``record`` is the
+#: same call for the C call list (:class:`~robofmu.system.call_list.Record`), which makes a list
+#: of them in one ctypes call (:func:`~robofmu.system.call_list.batch`: then ``block`` is its
+#: :class:`~robofmu.system.call_list.Batch`). A plain tuple: the loop unpacks it in one bytecode.
 Call = tuple
 
 
@@ -260,8 +263,11 @@ def _bind(library: ctypes.CDLL, name: str):
     return function
 
 
-def failed(block: str, status: int, call: str) -> Failure:
-    """The :class:`Failure` of ``call`` on ``block`` that returned ``status`` (fmi2Error or worse)."""
+def failed(block, status: int, call: str | None) -> Failure:
+    """The :class:`Failure` of ``call`` on ``block`` that returned ``status`` (fmi2Error or worse);
+    ``block`` a :class:`~robofmu.system.call_list.Batch`: of the call in it that failed."""
+    if isinstance(block, Batch):
+        block, call = block.failed()
     return Failure(block, status_name(status).lower(), call)
 
 
@@ -282,7 +288,8 @@ def getters(functions: Fmi2Functions, ports: Ports, name: str) -> list[Call]:
     -------
     list of Call
     """
-    return [(function, (functions.argument, *port.arguments), name, call)
+    return [(function, (functions.argument, *port.arguments), name, call,
+             Record(function, functions.component.value, port.references, port.count, port.values))
             for port, function, call in ((ports.get_real, functions.get_real, "fmi2GetReal"),
                                          (ports.get_boolean, functions.get_boolean, "fmi2GetBoolean"))
             if port.count]
@@ -313,13 +320,17 @@ def setters(functions: Fmi2Functions, inputs: Inputs, real_signals: np.ndarray,
     calls = []
     real, boolean = inputs.real, inputs.boolean
     if real.count and inputs.real_in_place:
-        calls.append((functions.set_real, (functions.argument, *real.arguments), name, "fmi2SetReal"))
+        calls.append((functions.set_real, (functions.argument, *real.arguments), name, "fmi2SetReal",
+                      Record(functions.set_real, functions.component.value, real.references, real.count,
+                             real.values)))
     elif real.count:
         def set_real(take=real_signals.take, sources=inputs.real_sources, buffer=real.buffer,
                      function=functions.set_real, arguments=(functions.argument, *real.arguments)):
             take(sources, out=buffer)
             return function(*arguments)
-        calls.append((set_real, (), name, "fmi2SetReal"))
+        calls.append((set_real, (), name, "fmi2SetReal",
+                      Record(functions.set_real, functions.component.value, real.references, real.count,
+                             real.values, real_signals, inputs.real_sources)))
     if boolean.count:
         # the sources' values as one int (one input) or a tuple, read without NumPy
         pick = operator.itemgetter(*inputs.boolean_sources.tolist())
@@ -335,7 +346,10 @@ def setters(functions: Fmi2Functions, inputs: Inputs, real_signals: np.ndarray,
             if status <= 1:
                 last[0] = now
             return status
-        calls.append((set_boolean, (), name, "fmi2SetBoolean"))
+        calls.append((set_boolean, (), name, "fmi2SetBoolean",
+                      Record(functions.set_boolean, functions.component.value, boolean.references, boolean.count,
+                             boolean.values, boolean_signals, inputs.boolean_sources,
+                             np.zeros(boolean.count, dtype=np.int32), np.zeros(1, dtype=np.int32))))
     return calls
 
 
@@ -356,7 +370,8 @@ def stepper(functions: Fmi2Functions, name: str, time: ctypes.c_double, size: fl
     Call
         fmi2DoStep(time, size, noSetFMUStatePriorToCurrentPoint = fmi2True).
     """
-    return (functions.do_step, (functions.argument, time, fmi2Real.from_param(size), _TRUE), name, "fmi2DoStep")
+    return (functions.do_step, (functions.argument, time, fmi2Real.from_param(size), _TRUE), name, "fmi2DoStep",
+            Record(functions.do_step, functions.component.value, time=time, step=float(size)))
 
 
 _TRUE = fmi2Boolean.from_param(fmi2True)

@@ -52,6 +52,7 @@ from fmpy.fmi2 import fmi2Real
 
 from robofmu.components.fmi.reporting import INTERRUPTION
 from robofmu.system.defaults import ALGORITHMS
+from robofmu.system.call_list import batch, runner
 from robofmu.system.diagram import System
 from robofmu.system.exchange import (Failure, Fmi2Functions, Inputs, Ports, failed, getters, output_port,
                                      setters, stepper)
@@ -59,7 +60,7 @@ from robofmu.system.fmu import FMUInstance, FMUError, LogMessage
 from robofmu.system.interrupt import sigint_flag
 from robofmu.system.plan import (DiagramError, Link, Node, Plan, Times, available_memory, plan, step_count, times,
                                  variable_unit)
-from robofmu.system.result import HEALTH, Message, Result, group_messages, status_meanings
+from robofmu.system.result import HEALTH, Message, Result, group_messages, stated_time, status_meanings
 
 __all__ = ["DiagramError", "Interrupted", "Master", "Result", "SimulationError", "available_memory", "step_count"]
 
@@ -266,7 +267,8 @@ class Master:
         if self.debug or message.status != "OK":
             prefix = f"{message.instance}: "
             text = message.message[len(prefix):] if message.message.startswith(prefix) else message.message
-            self.heard.append(Message(message.instance, message.status, message.category, text, self._clock[0]))
+            self.heard.append(Message(message.instance, message.status, message.category, text,
+                                      stated_time(text, self._clock[0])))
         if self.log is not None:
             self.log(message)
 
@@ -280,7 +282,7 @@ class Master:
                 meanings[column] = status_meanings(self.nodes[block].variables[name].description)
         heard = list(self.heard)
         return Result(times, columns, recorded, info, dict(self.units), heard,
-                      group_messages(heard, times, columns, recorded, meanings))
+                      group_messages(heard, times, columns, recorded, meanings, list(self.order)))
 
     def _instantiate(self, start_time: float, stop_time: float) -> None:
         self.blocks = {}
@@ -348,7 +350,7 @@ class Master:
         self.units = {column: units[column] for column in self.columns if units[column]}
         self.keep = np.array(keep, dtype=np.intp)
 
-    def _operations(self, algorithm: str, h: float, time):
+    def _operations(self, algorithm: str, h: float, time, run=None):
         """The exchanges and steps as flat lists of :data:`~robofmu.system.exchange.Call` tuples
         over preallocated buffers.
 
@@ -361,6 +363,9 @@ class Master:
         ----------
         time : fmi2Real
             The communication point (s) every doStep passes, set by the loop.
+        run : ctypes function, optional
+            The C call list's (:func:`~robofmu.system.call_list.runner`): each exchange and
+            each round of steps is then one call of it; None: the single calls.
 
         Returns
         -------
@@ -382,13 +387,15 @@ class Master:
 
         def exchange(due, method):
             if method == "gauss-seidel":
-                return ([call for name in due for call in early[name] + reads[name]]
-                        + [call for name in due for call in late[name]])
-            return ([call for name in due for call in reads[name]]
-                    + [call for name in due for call in early[name] + late[name]])
+                calls = ([call for name in due for call in early[name] + reads[name]]
+                         + [call for name in due for call in late[name]])
+            else:
+                calls = ([call for name in due for call in reads[name]]
+                         + [call for name in due for call in early[name] + late[name]])
+            return batch(run, calls)
 
         def schedule(due, stepped):
-            return exchange(due, algorithm), [steps[name] for name in stepped]
+            return exchange(due, algorithm), batch(run, [steps[name] for name in stepped])
 
         return exchange(tuple(self.order), "gauss-seidel"), schedule
 
@@ -412,7 +419,8 @@ class Master:
             boolean_rows = memoryview(boolean_record.reshape(-1))
             width = len(row)
         time = fmi2Real()                   # the communication point of every doStep (s)
-        first, schedule = self._operations(algorithm, h, time)
+        run, calls_how = runner()
+        first, schedule = self._operations(algorithm, h, time, run)
         everyone = tuple(self.order)
         exchange, steps = schedule(everyone, everyone)
         # Multi-rate: which blocks are due at base step k (their inputs set, outputs read) and
@@ -444,7 +452,7 @@ class Master:
                 t = clock[0] = t0 + h * k      # = times_[k] bit for bit: the same two IEEE operations
                 if multirate:
                     exchange, steps = phases[k % cycle] if k <= regular else plan_at(k)
-                for function, arguments, block, call in (first if k == 0 else exchange):
+                for function, arguments, block, call, _ in (first if k == 0 else exchange):
                     status = function(*arguments)      # Jacobi, too, starts consistent
                     if status > 1:
                         raise failed(block, status, call)
@@ -468,7 +476,7 @@ class Master:
                 if k == n_steps:
                     break
                 time.value = t
-                for function, arguments, block, call in steps:
+                for function, arguments, block, call, _ in steps:
                     status = function(*arguments)
                     if status > 1:
                         raise failed(block, status, call)
@@ -499,7 +507,8 @@ class Master:
             raise SimulationError(message + (f"\nresults up to t = {times_[n_recorded - 1]:.9g} s kept"
                                              + (f" in {csv_path}" if csv_path else "") if n_recorded else ""),
                                   exc.block, float(t), result, message) from None
-        info = {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall, "order": list(self.order)}
+        info = {"algorithm": algorithm, "step": h, "wall_time": _time.perf_counter() - wall, "order": list(self.order),
+                "calls": calls_how}
         record_booleans()
         if multirate:
             info["sample_times"] = {name: r * h for name, r in ratios}

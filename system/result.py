@@ -17,6 +17,7 @@ false).
 from __future__ import annotations
 
 import csv
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +35,23 @@ HEALTH = {"status": 0.0, "reachable": 1.0, "within_limits": 1.0}
 _NUMBER = re.compile(r"(?<![\w.])[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|nan|inf)(?!\w)")
 #: The time a block puts before its message (``"t = 0.33 s: "``): the message's time says it.
 _TIME_PREFIX = re.compile(r"^t = [^ ]+ s: ")
+_STATED_TIME = re.compile(r"^t = ([^ ]+) s: ")
+
+
+def stated_time(text: str, clock: float) -> float:
+    """The time (s) a block's message states in its ``"t = <time> s: "`` prefix, else ``clock``.
+
+    A block without feedthrough evaluates its outputs for t + h inside the step from t, so its
+    own word on when is kept over the master's communication point.
+    """
+    match = _STATED_TIME.match(text)
+    if match is None:
+        return clock
+    try:
+        stated = float(match.group(1))
+    except ValueError:
+        return clock
+    return stated if math.isfinite(stated) else clock
 
 
 @dataclass(frozen=True)
@@ -51,8 +69,10 @@ class Message:
     text : str
         The FMU's words, without the ``"<block>: "`` the slave puts before them.
     time : float
-        The communication point (s) at which it arrived: the start time during initialization,
-        t during the exchange at t and the step from t.
+        The time (s) the block states in its ``"t = <time> s: "`` prefix (a block without
+        feedthrough says t + h for outputs it evaluates in the step from t); else the
+        communication point at which it arrived: the start time during initialization, t during
+        the exchange at t and the step from t.
     """
 
     block: str
@@ -149,7 +169,8 @@ def status_meanings(description: str) -> dict[int, str]:
 
 
 def group_messages(log: list[Message], time: np.ndarray, columns: list[str], data: np.ndarray,
-                   meanings: dict[str, dict[int, str]] | None = None) -> list[MessageGroup]:
+                   meanings: dict[str, dict[int, str]] | None = None,
+                   order: list[str] | None = None) -> list[MessageGroup]:
     """What the FMUs of a run said, grouped, with the excursions their health outputs recorded.
 
     Messages of one block with one status and one :func:`message_pattern` make one group
@@ -170,11 +191,15 @@ def group_messages(log: list[Message], time: np.ndarray, columns: list[str], dat
     data : ndarray, shape (k, m)
     meanings : dict, optional
         ``"<instance>.status"`` -> its codes' words (:func:`status_meanings`).
+    order : list of str, optional
+        The blocks in the diagram's evaluation order: groups whose first messages fall on one
+        recorded point follow it (a block without feedthrough speaks for t + h in the step
+        from t, before the exchange at t + h); else, and among one block's, the order logged.
 
     Returns
     -------
     list of MessageGroup
-        Message groups in the order of their first message, then the record's groups.
+        Message groups in the order of their first message's point, then the record's groups.
     """
     meanings = meanings or {}
     time = np.asarray(time, dtype=float)
@@ -189,11 +214,11 @@ def group_messages(log: list[Message], time: np.ndarray, columns: list[str], dat
         if message.status == "OK":
             continue
         key = (message.block, message.status, message_pattern(message.text))
-        group = groups.setdefault(key, {"first": message, "count": 0, "last": message.time,
+        k = int(np.searchsorted(time, message.time - 1e-9 * max(1.0, abs(message.time))))
+        group = groups.setdefault(key, {"first": message, "count": 0, "last": message.time, "point": k,
                                         "rows": np.zeros(len(time), dtype=bool), "signals": []})
         group["count"] += 1
         group["last"] = max(group["last"], message.time)
-        k = int(np.searchsorted(time, message.time - 1e-9 * max(1.0, abs(message.time))))
         for column, (block, off) in health.items():
             if block != message.block or k >= len(time) or not off[k]:
                 continue
@@ -203,8 +228,10 @@ def group_messages(log: list[Message], time: np.ndarray, columns: list[str], dat
             covered[column][k:end] = True
             if column not in group["signals"]:
                 group["signals"].append(column)
+    rank = {block: j for j, block in enumerate(order or ())}
     found = []
-    for (block, status, _), group in groups.items():
+    ranked = sorted(groups.items(), key=lambda item: (item[1]["point"], rank.get(item[0][0], len(rank))))
+    for (block, status, _), group in ranked:
         first, rows = group["first"], group["rows"]
         last = max(group["last"], float(time[np.flatnonzero(rows)[-1]])) if rows.any() else group["last"]
         found.append(MessageGroup(block, status, _TIME_PREFIX.sub("", first.text), group["count"], first.time,

@@ -18,7 +18,7 @@ import robofmu.system
 SYSTEM = Path(robofmu.system.__file__).resolve().parent
 
 #: The co-simulation core: the only modules directly in system/ (with ``cli``, the entry).
-CORE = {"analysis", "defaults", "diagram", "exchange", "experiment", "fmu", "interrupt", "master",
+CORE = {"analysis", "call_list", "compiled", "defaults", "diagram", "exchange", "experiment", "fmu", "interrupt", "master",
         "options", "plan", "plots", "result", "roles", "run", "units", "usage"}
 ENTRY = "cli"
 WINGS = {"commands", "interop", "packaging", "stepresponse", "studies", "sweep"}

@@ -20,7 +20,7 @@ import pytest
 
 from robofmu.system import cli, experiment
 from robofmu.system.master import Master, SimulationError
-from robofmu.system.result import Message, Result, group_messages, message_pattern, status_meanings
+from robofmu.system.result import Message, Result, group_messages, message_pattern, stated_time, status_meanings
 
 from robot_files import independent_model
 
@@ -125,6 +125,25 @@ def test_a_message_at_a_point_where_the_status_is_off_takes_its_excursion():
     assert (group.steps, group.first, group.last, group.signals) == (2, 1.0, 2.0, ("ik.status",))
     assert (rest.count, rest.steps, rest.first, rest.last) == (0, 1, 4.0, 4.0)     # the point no message started
 
+
+
+def test_a_message_s_time_is_the_one_its_block_states_else_the_point_it_arrived_at():
+    assert stated_time("t = 0.187 s: joint 3 velocity exceeds its limit", 0.186) == 0.187
+    assert stated_time("t = 1e-05 s: x", 0.0) == 1e-05
+    for text in ("joint 3 velocity exceeds its limit", "t = nan s: x", "t = soon s: x", "at t = 2 s: x"):
+        assert stated_time(text, 0.5) == 0.5
+
+
+def test_groups_first_on_one_point_follow_the_diagram_order_and_later_points_come_after():
+    """The plant speaks for t = 2 in its step from 1, before the IK's exchange at 2, and 'z'
+    speaks first at 1: the groups go by point, then by the diagram's order."""
+    time = np.arange(4) * 1.0
+    log = [Message("plant", "WARNING", "", "t = 2 s: too fast", 2.0),
+           Message("z", "WARNING", "", "odd", 1.0 + 1e-13),
+           Message("ik", "WARNING", "", "t = 2 s: not reached", 2.0 + 1e-13)]
+    groups = group_messages(log, time, [], np.zeros((4, 0)), order=["ik", "plant", "z"])
+    assert [g.block for g in groups] == ["z", "ik", "plant"]
+    assert [g.block for g in group_messages(log, time, [], np.zeros((4, 0)))] == ["z", "plant", "ik"]
 
 # -- robofmu run ----------------------------------------------------------------------------------------
 def test_run_prints_the_grouped_messages_with_the_record_s_counts(failing):
@@ -234,7 +253,11 @@ def test_the_python_api_result_carries_the_same_groups(failing, ur5_fmus):
     n, first, last = excursion(result, "ik.status", lambda v: v != 0)
     assert (record.block, record.steps, record.first, record.last, record.signals) == ("ik", n, first, last,
                                                                                         ("ik.status",))
-    assert [m.block for m in result.log] == ["ik", "plant"] and all(m.status == "WARNING" for m in result.log)
+    # The log keeps the order logged: the plant, without feedthrough, evaluates its outputs for
+    # t + h in its step from t and speaks before the IK's exchange at t + h; both say t + h.
+    assert [m.block for m in result.log] == ["plant", "ik"] and all(m.status == "WARNING" for m in result.log)
+    assert [m.time for m in result.log] == pytest.approx([0.187, 0.187], abs=1e-12)
+    assert [g.block for g in result.messages if g.count] == ["ik", "plant"]      # one point: diagram order
     assert master.heard == result.log
 
 

@@ -56,7 +56,6 @@ import shutil
 import subprocess
 import sys
 import sysconfig
-import tempfile
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree
@@ -68,6 +67,8 @@ from xml.etree import ElementTree
 # was built for; FRONT_BEHIND, the runtime behind the front library of a FMU container.
 from robofmu.components.fmi.contract import (FRONT_BEHIND, MARKER, MARKER_FUNCTION, PLATFORM, REGISTER,
                                              RUNTIME_RECORD, STATUS_CATEGORY, STOCK_LIBRARY)
+
+from robofmu.system.compiled import cache_folder
 
 from . import contract_header
 
@@ -120,21 +121,10 @@ def _compiler() -> list[str]:
 
 
 def _cache_dir() -> Path:
-    for candidate in (os.environ.get("ROBOFMU_CACHE"),
-                      Path(sys.prefix) / "share" / "robofmu",
-                      Path(tempfile.gettempdir()) / f"robofmu-cache-{os.getuid()}"):
-        if not candidate:
-            continue
-        folder = Path(candidate) / "fmi-export"
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            probe = folder / f".probe-{os.getpid()}"
-            probe.write_bytes(b"")
-            probe.unlink()
-            return folder
-        except OSError:
-            continue
-    raise FmiExportError("robofmu build: no writable folder for the compiled FMI export library")
+    try:
+        return cache_folder()
+    except OSError as exc:
+        raise FmiExportError(f"robofmu build: {exc}") from None
 
 
 def check_source(source: Path = SOURCE) -> None:

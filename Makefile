@@ -40,6 +40,7 @@ bench: $(FMU_STAMP)
 	$(PY) benchmarks/split.py
 	$(PY) benchmarks/split.py --experiment 3rrp-circle --steps 300
 	$(PY) benchmarks/loop.py
+	$(PY) benchmarks/instructions.py
 	$(PY) benchmarks/multirate.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/arms.py

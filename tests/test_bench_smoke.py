@@ -40,6 +40,8 @@ TABLES = {
     "split.py": [r"^\| all \| [-\d.]+ \| [-\d.]+ \| [-\d.]+ \| [\d.]+ \| \d+ \|$"],
     "loop.py": [r"^robofmu\s+5\s", r"^in-process\s+5\s", r"in-process vs robofmu master",
                 r"robofmu master <= 1\.20x in-process: (met|NOT met) \(\d+\.\d\dx\)"],
+    "instructions.py": [r"^robofmu\s+\(quick: not counted\)", r"^in-process\s+\(quick: not counted\)",
+                        r"^the master's FMI calls: (call list \(|single ctypes calls: )"],
     "multirate.py": [r"^\| chess-pd \| [\d.]+ \| [\d.]+ \| \d+\.\d\d \|", r"^\| ur5-pose \| [\d.]+ \| [\d.]+ \| \d+\.\d\d \|",
                      r"multi-rate cheaper per plant step than single-rate: (met|NOT met) on chess-pd"],
     "ik.py": [r"^chess\s+pitch_elbow\s+[\d.]+\s+0\.00\s+1\.00$", r"^panda\s+damped_least_squares\s"],

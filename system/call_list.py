@@ -8,7 +8,7 @@ bit the same either way (a test). Each single call carries its :class:`Record`, 
 the C loop needs (function pointer, component, value references, buffers); a Call without one
 (none today) leaves the list to Python.
 
-The library is compiled with the machine's C compiler the first time a process needs it
+The library is compiled with ``$CC``, the machine's C compiler or Zig's the first time a process needs it
 (cached beside robofmu's FMI export library, keyed by the source and the compiler) and loaded
 with ``ctypes.PyDLL``: the calling thread keeps the GIL through the list, as through the
 single calls (:class:`~robofmu.system.exchange.Fmi2Functions`). Where no compiler is found,
@@ -19,17 +19,18 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import importlib.util
 import os
 import shlex
-import shutil
 import subprocess
+import sys
 from functools import lru_cache
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
-from robofmu.system.compiled import cache_folder
+from robofmu.system.compiled import cache_folder, machine_compiler
 
 __all__ = ["Batch", "Record", "batch", "runner"]
 
@@ -146,13 +147,13 @@ def batch(run, calls: list) -> list:
 
 
 def _compiler() -> list[str] | None:
+    """$CC, else the machine's compiler, else Zig's (``ziglang``, the dev extra), else None."""
     if os.environ.get("CC"):
         return shlex.split(os.environ["CC"])
-    for name in ("cc", "gcc", "clang"):
-        path = shutil.which(name)
-        if path:
-            return [path]
-    return None
+    found = machine_compiler()
+    if found is None and importlib.util.find_spec("ziglang") is not None:
+        found = [sys.executable, "-m", "ziglang", "cc"]
+    return found
 
 
 @lru_cache(maxsize=1)

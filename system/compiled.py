@@ -1,13 +1,15 @@
-"""Where robofmu keeps the C libraries it compiles on this machine (FMI export library, the
-master's call list), each under a key of its source and compiler."""
+"""The C libraries robofmu compiles on this machine (FMI export library, the master's call
+list): where they are cached, each under a key of its source and compiler, and the machine's
+C compiler."""
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["cache_folder"]
+__all__ = ["cache_folder", "machine_compiler"]
 
 
 def cache_folder() -> Path:
@@ -35,3 +37,12 @@ def cache_folder() -> Path:
             continue
     raise OSError("no writable folder for robofmu's compiled C libraries "
                   "(ROBOFMU_CACHE, <sys.prefix>/share/robofmu, the temporary folder)")
+
+
+def machine_compiler() -> list[str] | None:
+    """The machine's C compiler, the first of cc, gcc and clang on the PATH, or None."""
+    for name in ("cc", "gcc", "clang"):
+        path = shutil.which(name)
+        if path:
+            return [path]
+    return None

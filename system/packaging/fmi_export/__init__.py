@@ -52,7 +52,6 @@ import os
 import platform
 import re
 import shlex
-import shutil
 import subprocess
 import sys
 import sysconfig
@@ -68,7 +67,7 @@ from xml.etree import ElementTree
 from robofmu.components.fmi.contract import (FRONT_BEHIND, MARKER, MARKER_FUNCTION, PLATFORM, REGISTER,
                                              RUNTIME_RECORD, STATUS_CATEGORY, STOCK_LIBRARY)
 
-from robofmu.system.compiled import cache_folder
+from robofmu.system.compiled import cache_folder, machine_compiler
 
 from . import contract_header
 
@@ -111,10 +110,9 @@ def _compiler() -> list[str]:
         return shlex.split(os.environ["CC"])
     if importlib.util.find_spec("ziglang") is not None:
         return [sys.executable, "-m", "ziglang", "cc", "-target", f"x86_64-linux-gnu.{GLIBC_BASELINE}"]
-    for name in ("cc", "gcc", "clang"):
-        path = shutil.which(name)
-        if path:
-            return [path]
+    found = machine_compiler()
+    if found:
+        return found
     raise FmiExportError(
         f"robofmu build: no C compiler found ($CC, cc, gcc, clang). The FMUs need robofmu's FMI "
         f"export library, compiled from {SOURCE}; install one (Debian: apt-get install gcc) or set CC.")

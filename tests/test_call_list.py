@@ -45,7 +45,8 @@ def _run(system):
     return Master(system).run(stop_time=STOP)
 
 
-@pytest.mark.parametrize("name", experiment.available())
+@pytest.mark.parametrize("name", [name if name == "chess-pd" else pytest.param(name, marks=pytest.mark.slow)
+                                  for name in experiment.available()])       # make check: chess-pd
 def test_the_call_list_runs_every_experiment_bit_for_bit_as_the_single_calls(fmu_root, name, monkeypatch):
     system = experiment.load(name, fmu_dir=fmu_root)
     listed = _run(system)
@@ -58,6 +59,7 @@ def test_the_call_list_runs_every_experiment_bit_for_bit_as_the_single_calls(fmu
     np.testing.assert_array_equal(listed.data, single.data)
 
 
+@pytest.mark.slow
 def test_the_experiments_exercise_every_kind_of_call_the_list_makes(fmu_root, monkeypatch):
     """Gathered Real inputs and Boolean inputs are in some packaged experiment, so the test above
     covers every branch of the C loop."""
@@ -69,6 +71,7 @@ def test_the_experiments_exercise_every_kind_of_call_the_list_makes(fmu_root, mo
             ("fmi2SetBoolean", True), ("fmi2DoStep", False)} <= kinds
 
 
+@pytest.mark.slow
 def test_a_multirate_run_is_the_same_through_the_list(fmu_root, monkeypatch):
     system = experiment.load("chess-pd", fmu_dir=fmu_root)
     system.block("controller").sample_time = 0.004

@@ -51,8 +51,8 @@ import numpy as np
 from fmpy.fmi2 import fmi2Real
 
 from robofmu.components.fmi.reporting import INTERRUPTION
-from robofmu.system.defaults import ALGORITHMS
 from robofmu.system.call_list import batch, runner
+from robofmu.system.defaults import ALGORITHMS
 from robofmu.system.diagram import System
 from robofmu.system.exchange import (Failure, Fmi2Functions, Inputs, Ports, failed, getters, output_port,
                                      setters, stepper)

@@ -436,6 +436,7 @@ class Master:
                 return schedule(tuple(name for name, r in ratios if k % r == 0),
                                 tuple(name for name, r in ratios if k % r == 0 and k + r <= n_steps))
             phases = [plan_at(k) for k in range(min(cycle, n_steps + 1))]
+            last = {k: plan_at(k) for k in range(max(regular + 1, 0), n_steps + 1)}    # made before the loop
         clock = self._clock
         every = max(1, n_steps // 20)
         progress = self.progress
@@ -451,7 +452,7 @@ class Master:
             for k in range(n_steps + 1):
                 t = clock[0] = t0 + h * k      # = times_[k] bit for bit: the same two IEEE operations
                 if multirate:
-                    exchange, steps = phases[k % cycle] if k <= regular else plan_at(k)
+                    exchange, steps = phases[k % cycle] if k <= regular else last[k]
                 for function, arguments, block, call, _ in (first if k == 0 else exchange):
                     status = function(*arguments)      # Jacobi, too, starts consistent
                     if status > 1:

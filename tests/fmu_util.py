@@ -7,7 +7,8 @@
   wires and the evaluation order), nothing is wired here; a test that only needs a loop run
   drives :class:`robofmu.system.master.Master` instead;
 - :class:`RawInstance`: one instance through fmpy's ``FMU2Slave`` with the raw FMI functions
-  (statuses as returned) and a logger of the test's own, for tests of statuses and messages.
+  (statuses as returned) and a logger of the test's own, for tests of statuses and messages;
+- :func:`refuse_plant_steps`: a robot's plant that refuses every step from a given time.
 """
 from __future__ import annotations
 
@@ -33,6 +34,22 @@ def open_block(fmu_dir, block, name=None, parameters=None, start_time=0.0):
     b = FMUInstance(Path(fmu_dir) / f"{block}.fmu", name or block)
     b.initialize(start_time, parameters)
     return b
+
+
+def refuse_plant_steps(monkeypatch, robot: str, time: float) -> None:
+    """Make ``robot``'s plant refuse (``StepRefused("refused for the test")``) its steps from
+    ``time`` (s) on, in this process (the FMUs' slaves run the same classes)."""
+    from robofmu.components.blocks import StepRefused, block_type
+
+    cls = block_type(load_description(robot), "plant")
+    original = cls.advance
+
+    def advance(self, t, h):
+        if t >= time - 1e-12:
+            raise StepRefused("refused for the test")
+        return original(self, t, h)
+
+    monkeypatch.setattr(cls, "advance", advance)
 
 
 def robot_blocks(kinds=None, robots=None) -> list:

@@ -15,6 +15,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from fmu_util import refuse_plant_steps
 
 from robofmu.system import call_list, experiment
 from robofmu.system import master as master_module
@@ -88,18 +89,7 @@ def test_a_multirate_run_is_the_same_through_the_list(fmu_root, monkeypatch):
 def test_a_call_that_fails_in_the_list_is_named_by_block_and_function(fmu_root, monkeypatch, list_on):
     """The plant refuses its step from t = 0.02 s: the failure names the plant's fmi2DoStep at
     that time either way, and the rows up to it are kept."""
-    from robofmu.components.blocks import StepRefused, block_type
-    from robofmu.components.robots import load_description
-
-    cls = block_type(load_description("chess"), "plant")
-    original = cls.advance
-
-    def advance(self, t, h):
-        if t >= 0.02 - 1e-12:
-            raise StepRefused("refused for the test")
-        return original(self, t, h)
-
-    monkeypatch.setattr(cls, "advance", advance)
+    refuse_plant_steps(monkeypatch, "chess", 0.02)
     if not list_on:
         _single_calls(monkeypatch)
     with pytest.raises(SimulationError) as failed:

@@ -22,6 +22,7 @@ from robofmu.system import cli, experiment
 from robofmu.system.master import Master, SimulationError
 from robofmu.system.result import Message, Result, group_messages, message_pattern, stated_time, status_meanings
 
+from fmu_util import refuse_plant_steps
 from robot_files import independent_model
 
 SET = "trajectory.displacement[1]=5"
@@ -264,18 +265,7 @@ def test_the_python_api_result_carries_the_same_groups(failing, ur5_fmus):
 def test_a_failed_run_s_partial_result_carries_the_messages(ur5_fmus, monkeypatch):
     """The plant refuses its step from t = 0.5 s: the SimulationError's result holds the IK's
     warning of t = 0.187 s and the plant's error, grouped."""
-    from robofmu.components.blocks import StepRefused, block_type
-    from robofmu.components.robots import load_description
-
-    cls = block_type(load_description("ur5"), "plant")
-    original = cls.advance
-
-    def advance(self, t, h):
-        if t >= 0.5 - 1e-12:
-            raise StepRefused("refused for the test")
-        return original(self, t, h)
-
-    monkeypatch.setattr(cls, "advance", advance)
+    refuse_plant_steps(monkeypatch, "ur5", 0.5)
     system = experiment.with_parameters(experiment.load("ur5-pose", fmu_dir=ur5_fmus),
                                         {"trajectory.displacement[1]": 5.0})
     with pytest.raises(SimulationError) as failed:

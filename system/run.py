@@ -35,7 +35,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from robofmu.system import analysis, experiment
+from robofmu.system import analysis, defaults, experiment
 from robofmu.system.diagram import System, parameter_address
 from robofmu.system.master import DiagramError, Interrupted, Master, Result, SimulationError
 from robofmu.system.roles import Roles, check_roles
@@ -219,7 +219,7 @@ def reference_check(system: System, master: Master, parameters: dict, step: floa
     return None
 
 
-def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = "fmus", step: float | None = None,
+def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = defaults.FMU_FOLDER, step: float | None = None,
                    stop_time: float | None = None, algorithm: str | None = None, progress: bool = True,
                    figures: bool = True, parameters: dict | None = None, results_format: str = "csv",
                    debug: bool = False) -> Run:

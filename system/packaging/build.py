@@ -30,6 +30,7 @@ from pythonfmu import FmuBuilder
 import robofmu.components as components
 from robofmu.components.fmi.base import ROBOT_FOLDER
 from robofmu.components.robots import RobotDescription, load_description
+from robofmu.system import defaults
 from robofmu.system.packaging import fmi_export
 from robofmu.system.packaging.requirements import requirements_text
 from robofmu.system.usage import atomic_file
@@ -106,7 +107,7 @@ def stage_code(package_dir: Path, target: Path) -> None:
         shutil.copyfile(package_dir / relative, target / relative)
 
 
-def build(robot: str | Path, out_dir: str | Path = "fmus", blocks: list[str] | None = None,
+def build(robot: str | Path, out_dir: str | Path = defaults.FMU_FOLDER, blocks: list[str] | None = None,
           log=print, check: bool = True) -> list[Path]:
     """Build ``out_dir/<robot name>/<block>.fmu`` for each block; returns the paths.
 

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from robofmu.system import defaults
 from robofmu.system.packaging.requirements import REQUIREMENT_LINE, declared, needs, normalize
 
 __all__ = ["Requirement", "doctor", "fmu_problems", "libpython", "requirements", "runtime_problems"]
@@ -315,7 +316,7 @@ def step_problem(path: Path, timeout: float = 120.0) -> str | None:
     return None
 
 
-def doctor(fmu_dir: str | Path = "fmus", say: Callable[[str], None] = print) -> int:
+def doctor(fmu_dir: str | Path = defaults.FMU_FOLDER, say: Callable[[str], None] = print) -> int:
     """Print what a process needs to run the FMUs under ``fmu_dir``, and check it here.
 
     Parameters

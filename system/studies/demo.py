@@ -315,7 +315,7 @@ def _only_runs(folder: Path) -> bool:
         return False
 
 
-def demo(out: Path, fmu_dir: str | Path = "fmus", quick: bool = False) -> int:
+def demo(out: Path, fmu_dir: str | Path = defaults.FMU_FOLDER, quick: bool = False) -> int:
     """Run the studies of ``system/studies/demo.toml`` and write ``out/report.md`` with its figures.
 
     The output folder is replaced whole, so no stale figure stays beside new results: the demo

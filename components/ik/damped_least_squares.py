@@ -158,16 +158,15 @@ class DampedLeastSquaresIK(IKSolver):
         # (lower, upper) of each joint with a limit, as floats: the margins are taken in floats
         self._limited = [(float(self.lower[j]), float(self.upper[j]), j) for j in limited]
         self.m = robot.m
-        self.rows = robot.task_rows
-        self._position_rows = list(robot.description.task.axes)
-        self._orientation_rows = list(robot.orientation_axes)
-        self._pose = bool(self._orientation_rows)
-        if self.rows > n:
-            raise ValueError(f"IK solver {self.kind!r}: {self.rows} task rows for {n} joints: more task "
+        self.task_rows = robot.task_rows
+        self._index = robot.task_index
+        if self._index is None:
+            raise ValueError(f"IK solver {self.kind!r}: robot {robot.description.name!r} has no task frame "
+                             "(its task coordinates are its mechanism's own); give it a closed-form IK")
+        self._pose = bool(self._index.orientation)
+        if self.task_rows > n:
+            raise ValueError(f"IK solver {self.kind!r}: {self.task_rows} task rows for {n} joints: more task "
                              "coordinates than joints cannot all be tracked")
-        task_rows = self._position_rows + [3 + axis for axis in self._orientation_rows]
-        self._task_rows = _slice_if_consecutive(task_rows)            # a view where it can
-        self._all_orientation = _slice_if_consecutive(self._orientation_rows)
         self._posture_slope = np.full(n, -self.posture_gain)
         self._bounds = list(zip(self.lower.tolist(), self.upper.tolist()))          # per joint, as floats
         # the null-space motion's bounds per joint, as floats: (rest, lower, upper, clearance), and
@@ -181,15 +180,15 @@ class DampedLeastSquaresIK(IKSolver):
         # Buffers, each consumed within the call that fills it (the arrays returned are new)
         self._identity = np.eye(n)
         self._null = np.empty((n, n))
-        self._je = np.empty((self.rows, n))
+        self._je = np.empty((self.task_rows, n))
         self._angular = np.empty((3, n))
-        self._normal = np.empty((self.rows, self.rows))
-        self._normal_diagonal = self._normal.reshape(-1)[::self.rows + 1]            # a view
-        self._gains = np.empty(self.rows)
-        self._scaled = np.empty((n, self.rows))
-        self._inverse = np.empty((n, self.rows))
-        self._nu = np.empty(self.rows)                    # [xd; S_o R^T omega]
-        self._a = np.empty(self.rows)                     # [xdd; S_o R^T omegad], then minus Jdot qd
+        self._normal = np.empty((self.task_rows, self.task_rows))
+        self._normal_diagonal = self._normal.reshape(-1)[::self.task_rows + 1]            # a view
+        self._gains = np.empty(self.task_rows)
+        self._scaled = np.empty((n, self.task_rows))
+        self._inverse = np.empty((n, self.task_rows))
+        self._nu = np.empty(self.task_rows)                    # [xd; S_o R^T omega]
+        self._a = np.empty(self.task_rows)                     # [xdd; S_o R^T omegad], then minus Jdot qd
         self._task_parts = (self._nu[:self.m], self._a[:self.m], self._nu[self.m:], self._a[self.m:])
         self._qd0 = np.empty(n)
         self._slope = np.empty(n)
@@ -233,12 +232,12 @@ class DampedLeastSquaresIK(IKSolver):
         else:
             position, rotation, full = robot.kinematics(q)
             self._full = full
-            self._jacobian = full[self._task_rows]
+            self._jacobian = full[self._index.six]
             self._rotation = rotation
             self._relative = self._target_rotation.T.dot(rotation)
             p, log = position.tolist(), pin.log3(self._relative).tolist()
-            e = [p[i] - target for i, target in zip(self._position_rows, x)]
-            e += [log[i] for i in self._orientation_rows]
+            e = [p[i] - target for i, target in zip(self._index.position, x)]
+            e += [log[i] for i in self._index.orientation]
         self._e = e
         position, orientation = e[:m], e[m:]
         return math.sqrt(sum(map(mul, position, position))), math.sqrt(sum(map(mul, orientation, orientation)))
@@ -247,13 +246,13 @@ class DampedLeastSquaresIK(IKSolver):
         """J_e (task_rows, n) at the joints of the last :meth:`_evaluate`: a buffer for a pose task."""
         if not self._pose:
             return self._jacobian
-        J, m, rows = self._je, self.m, self._all_orientation
+        J, m, angular = self._je, self.m, self._index.angular
         J[:m] = self._jacobian[:m]
-        if rows == slice(0, 3):
+        if angular == slice(0, 3):
             np.dot(pin.Jlog3(self._relative), self._full[3:], out=J[m:])
         else:
             np.dot(pin.Jlog3(self._relative), self._full[3:], out=self._angular)
-            J[m:] = self._angular[rows]
+            J[m:] = self._angular[angular]
         return J
 
     def position(self, x, quaternion=None):
@@ -317,7 +316,7 @@ class DampedLeastSquaresIK(IKSolver):
         return self._qd0, self._slope
 
     def solve(self, x, xd, xdd, quaternion=None, omega=None, omegad=None):
-        robot, rows, report = self.robot, self.rows, self.report
+        robot, task_rows, report = self.robot, self.task_rows, self.report
         report["joint_limit_margin"] = report["smallest_singular_value"] = 0.0
         report["status"] = float(NOT_CONVERGED)
         q = self.position(x, quaternion)
@@ -327,14 +326,14 @@ class DampedLeastSquaresIK(IKSolver):
         smallest = math.sqrt(max(float(eigenvalues[0]), 0.0)) if info == 0 else 0.0
         damping2 = 0.0
         if smallest >= CLEAR * self.singular_value:      # full row rank, undamped: J# = J^T (J J^T)^-1
-            inverse = gesv(J, self._identity)[2] if rows == robot.n else posv(gram, J)[1].T
+            inverse = gesv(J, self._identity)[2] if task_rows == robot.n else posv(gram, J)[1].T
             row_space = inverse, J                       # V_r V_r^T = J# J
         else:                                            # near (or at) a singularity: the full SVD
             U, sigma, Vt, _ = gesdd(J, compute_uv=1, full_matrices=1)
             smallest = float(sigma[-1])
             if smallest < self.singular_value:
                 damping2 = self.damping ** 2 * (1.0 - (smallest / self.singular_value) ** 2)
-            range_ = Vt[:rows]
+            range_ = Vt[:task_rows]
             gains = np.multiply(sigma, sigma, out=self._gains)                    # sigma / (sigma^2 + lambda^2)
             gains += damping2
             np.divide(sigma, gains, out=gains)
@@ -345,11 +344,11 @@ class DampedLeastSquaresIK(IKSolver):
         nu_task[:] = xd
         a_task[:] = xdd
         if self._pose:
-            local = self._rotation.T[self._all_orientation]                            # S_o R^T
+            local = self._rotation.T[self._index.angular]                            # S_o R^T
             np.dot(local, omega, out=nu_angular)
             np.dot(local, omegad, out=a_angular)
         qd = inverse.dot(nu)
-        if rows == robot.n:
+        if task_rows == robot.n:
             qdd = inverse.dot(np.subtract(a, robot.jdot_qdot(q, qd), out=a))
         else:
             left, right = row_space                      # N = I - V_r V_r^T: the null space of J
@@ -394,9 +393,3 @@ class DampedLeastSquaresIK(IKSolver):
         return (f"near a singularity: smallest singular value of the Jacobian "
                 f"{r['smallest_singular_value']:.3g} < singular_value {self.singular_value:g} {where}")
 
-
-def _slice_if_consecutive(rows: list[int]) -> slice | list[int]:
-    """The rows as a slice (indexing by it gives a view) where they are consecutive and ascending."""
-    if rows and rows == list(range(rows[0], rows[0] + len(rows))):
-        return slice(rows[0], rows[0] + len(rows))
-    return rows

@@ -9,6 +9,8 @@ mechanism can implement the same methods in its actuated coordinates.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -21,6 +23,62 @@ _DERIVATIVE_SUFFIX = ("", "/s", "/s2")
 def derivative_unit(unit: str, order: int) -> str:
     """SI unit of the ``order``-th time derivative (0, 1, 2) of a coordinate in ``unit``."""
     return unit + _DERIVATIVE_SUFFIX[order]
+
+
+def consecutive(indices) -> slice | list[int]:
+    """``indices`` as a slice where they are consecutive and ascending (indexing by it gives a
+    view), else as a list."""
+    indices = list(indices)
+    if indices and indices == list(range(indices[0], indices[0] + len(indices))):
+        return slice(indices[0], indices[0] + len(indices))
+    return indices
+
+
+@dataclass(frozen=True)
+class TaskIndex:
+    """Which rows of a frame's six-row quantities a task tracks, in the task's order.
+
+    Pinocchio's frame Jacobians, velocities and accelerations stack [linear; angular], three
+    rows each. A task's rows are first the tracked axes of the linear part (the task point,
+    world-aligned), then the tracked axes of the angular part (about the task frame's own axes).
+
+    Parameters
+    ----------
+    position : tuple of int
+        Tracked linear axes (0, 1, 2: x, y, z), one per task coordinate.
+    orientation : tuple of int
+        Tracked angular axes (0, 1, 2); none: a position task.
+    """
+
+    position: tuple[int, ...]
+    orientation: tuple[int, ...] = ()
+
+    def __post_init__(self):
+        for name in ("position", "orientation"):
+            axes = tuple(getattr(self, name))
+            if any(a not in (0, 1, 2) for a in axes) or len(set(axes)) != len(axes):
+                raise ValueError(f"task {name} axes must be distinct values of 0, 1, 2, got {axes}")
+            object.__setattr__(self, name, axes)
+
+    @cached_property
+    def linear(self) -> slice | list[int]:
+        """The position rows within the linear part (rows 0-2)."""
+        return consecutive(self.position)
+
+    @cached_property
+    def angular(self) -> slice | list[int]:
+        """The orientation rows within the angular part (rows 3-5 counted from 0)."""
+        return consecutive(self.orientation)
+
+    @cached_property
+    def six(self) -> slice | list[int]:
+        """The task's rows within all six."""
+        return consecutive(self.position + tuple(3 + axis for axis in self.orientation))
+
+    @property
+    def is_full_pose(self) -> bool:
+        """Whether the task tracks all six rows, in Pinocchio's order."""
+        return self.position == (0, 1, 2) and self.orientation == (0, 1, 2)
 
 
 class RobotModel(ABC):
@@ -44,6 +102,9 @@ class RobotModel(ABC):
     joint_names: list[str]
     #: A pose task's rotations, about these axes of the task frame (0, 1, 2); none: a position task.
     orientation_axes: tuple[int, ...] = ()
+    #: A task on a frame: which rows of its six-row quantities the task's are (None: a mechanism
+    #: in its own task coordinates).
+    task_index: TaskIndex | None = None
 
     @property
     def task_rows(self) -> int:

@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from ..orientation import canonical
 from .description import DescriptionError, RobotDescription
-from .model import RobotModel, derivative_unit
+from .model import RobotModel, TaskIndex, derivative_unit
 from .urdf import MOVABLE, Urdf, UrdfError, read_urdf
 
 
@@ -261,16 +261,9 @@ class SerialRobot(RobotModel):
         if len(description.configuration("home")) != self.n:
             raise ValueError(f"{description.path}: configurations.home: {self._home_length()}")
         self.task_id = self._frame(description.task.frame, "task.frame")
-        self._axes = np.array(description.task.axes)
-        self._task_axes = list(description.task.axes)
-        self.m = len(self._axes)
-        first = int(self._axes[0])               # the Jacobian's task rows: a slice where consecutive
-        consecutive = list(self._axes) == list(range(first, first + self.m))
-        self._rows = slice(first, first + self.m) if consecutive else self._axes
-        self.orientation_axes = tuple(description.task.orientation_axes)
-        self._orientation_rows = list(self.orientation_axes)
-        # a pose task tracking every axis: its rows are the full 6 x n Jacobian's, in order
-        self._full_pose = consecutive and first == 0 and self.m == 3 and self._orientation_rows == [0, 1, 2]
+        self.task_index = TaskIndex(description.task.axes, description.task.orientation_axes)
+        self.m = len(self.task_index.position)
+        self.orientation_axes = self.task_index.orientation
         self._direction = np.array(description.gravity_direction)
         self.set_gravity(description.gravity if gravity is None else gravity)
         self.payload = 0.0
@@ -392,7 +385,7 @@ class SerialRobot(RobotModel):
     # -- kinematics -------------------------------------------------------------------------
     def fk(self, q: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q)
-        return pin.updateFramePlacement(self.model, self.data, self.task_id).translation[self._rows]
+        return pin.updateFramePlacement(self.model, self.data, self.task_id).translation[self.task_index.linear]
 
     def rotation(self, q: np.ndarray) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q)
@@ -401,7 +394,7 @@ class SerialRobot(RobotModel):
     def fk_quaternion(self, q: np.ndarray) -> tuple[list[float], list[float]]:
         pin.forwardKinematics(self.model, self.data, q)
         pose = pin.SE3ToXYZQUAT(pin.updateFramePlacement(self.model, self.data, self.task_id)).tolist()
-        return [pose[axis] for axis in self._task_axes], canonical(pose[3:])    # (x, y, z, qx, qy, qz, qw)
+        return [pose[axis] for axis in self.task_index.position], canonical(pose[3:])    # (x, y, z, qx, qy, qz, qw)
 
     def pose(self, q: np.ndarray) -> pin.SE3:
         """The task frame's placement (frame to world) at ``q``: a new ``pinocchio.SE3``."""
@@ -421,25 +414,26 @@ class SerialRobot(RobotModel):
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         if not self.orientation_axes:
             return pin.computeFrameJacobian(self.model, self.data, q, self.task_id,
-                                            pin.LOCAL_WORLD_ALIGNED)[self._rows]
+                                            pin.LOCAL_WORLD_ALIGNED)[self.task_index.linear]
         full = self.kinematics(q)[2]                          # angular rows about the frame's own axes
-        return np.vstack([full[self._rows], full[3:][self._orientation_rows]])
+        return full[self.task_index.six]
 
     def _pose_rows(self, world: np.ndarray, local: np.ndarray) -> np.ndarray:
         """A pose task's rows: the task axes of ``world``'s linear part (world-aligned), then the
         tracked axes of ``local``'s angular part (about the frame's own axes); both stacked as
         Pinocchio's 6-row [linear; angular]. ``world`` itself where every row is tracked."""
-        if self._full_pose:
+        index = self.task_index
+        if index.is_full_pose:
             world[3:] = local[3:]
             return world
-        return np.concatenate([world[self._rows], local[3:][self._orientation_rows]])
+        return np.concatenate([world[index.linear], local[3:][index.angular]])
 
     def jdot_qdot(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         model, data, frame = self.model, self.data, self.task_id
         pin.forwardKinematics(model, data, q, qd, self._zero)
         acceleration = pin.getFrameClassicalAcceleration(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
         if not self.orientation_axes:
-            return acceleration.linear[self._rows]
+            return acceleration.linear[self.task_index.linear]
         # d/dt (R^T omega) = R^T omega_dot (the term dR^T/dt omega = -R^T (omega x omega) vanishes):
         # the angular part of the classical acceleration in the frame's own axes (LOCAL)
         local = pin.getFrameClassicalAcceleration(model, data, frame, pin.LOCAL)
@@ -454,7 +448,7 @@ class SerialRobot(RobotModel):
         pin.computeJointJacobiansTimeVariation(model, data, q, qd)
         derivative = pin.getFrameJacobianTimeVariation(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
         if not self.orientation_axes:
-            return derivative[self._rows]
+            return derivative[self.task_index.linear]
         return self._pose_rows(derivative, pin.getFrameJacobianTimeVariation(model, data, frame, pin.LOCAL))
 
     # -- dynamics ---------------------------------------------------------------------------

@@ -561,6 +561,10 @@ def _resolve_states(description: RobotDescription) -> RobotDescription:
 def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | None = None) -> RobotDescription:
     """Read and validate one description file.
 
+    Each top-level table has its reader below (``_read_*``), all on one validator
+    (:class:`_Table`), called in the file's order of dependence: a table's reader gets what the
+    tables it depends on gave.
+
     Parameters
     ----------
     path : str or Path
@@ -579,80 +583,130 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
         Naming the file and the key for a missing, malformed or unknown entry.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise DescriptionError(path, "(file)", "does not exist") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise DescriptionError(path, "(syntax)", str(exc)) from None
-    top = _Table(path, data)
-    top.unknown({"name", "summary", "urdf", "mechanism", "blocks", "task", "configurations", "gravity",
-                 "payload", "gains", "default_gains", "trajectory", "trajectories", "ik", "joints", "xacro_args",
-                 "srdf"})
+    top = _Table(path, _toml(path))
+    top.unknown(TOP_KEYS)
     copy = urdf is not None
     if copy and srdf is None:
         srdf = Path(urdf).with_suffix(".srdf")
     name = top.string("name", _REQUIRED)
     if name != path.stem:
         top.fail("name", f"must be the file's name {path.stem!r}, got {name!r}")
-    mechanism = None
-    mech = top.table("mechanism", None)
-    xacro_args = {}
-    if mech is None:
-        urdf = _urdf(top, path, urdf)
-        arguments = top.table("xacro_args", None)
-        if arguments is not None:
-            if not _named_urdf(top).endswith(".xacro"):
-                top.fail("xacro_args", f"only for a .xacro urdf, and {_named_urdf(top)!r} is none: drop them")
-            for key, value in arguments.data.items():
-                if isinstance(value, (dict, list)):
-                    arguments.fail(key, f"must be a string or a number, got {value!r}")
-            xacro_args = {} if copy else {key: str(value).lower() if isinstance(value, bool) else str(value)
-                                          for key, value in arguments.data.items()}
-    else:
-        if "urdf" in data:
-            top.fail("mechanism", "a robot has either a `urdf` or a [mechanism] table, not both")
-        for key in ("xacro_args", "srdf"):
-            if key in data:
-                top.fail(key, "only for a robot with a `urdf`")
-        urdf = None
-        kind = mech.string("kind", _REQUIRED)
-        if kind not in MECHANISMS:
-            mech.fail("kind", f"unknown mechanism {kind!r} (known: {', '.join(sorted(MECHANISMS))})")
-        mechanism = MECHANISMS[kind](mech, kind)
+    urdf, mechanism, xacro_args = _read_source(top, urdf, copy)
     blocks = top.strings("blocks", _REQUIRED)
     for b in blocks:
         if b not in KNOWN_BLOCKS:
             top.fail("blocks", f"unknown block {b!r} (known: {', '.join(KNOWN_BLOCKS)})")
+    task_space = _read_task(top, mechanism)
+    srdf = None if urdf is None else _srdf(top, path, srdf)
+    states = _read_states(top, srdf, copy)
+    conf = top.table("configurations", _REQUIRED)
+    configurations, named_states = _read_configurations(conf, srdf)
+    magnitude, direction = _read_gravity(top)
+    payload = _read_payload(top, task_space)
+    gains, default_gains = _read_gains(top)
+    trajectory, profiles = _read_trajectories(top, blocks)
+    ik_table = top.table("ik", None)
+    ik = _choice(ik_table, "solver") if ik_table is not None else None
+    if ("ik" in blocks) != (ik is not None):
+        top.fail("ik", "an [ik] table is needed exactly when `blocks` lists 'ik'")
+    joints = _read_joints(top, mechanism)
+    description = RobotDescription(
+        name=name, summary=top.string("summary", _REQUIRED), path=path, urdf=urdf, blocks=blocks,
+        task=task_space, configurations=configurations, gravity=magnitude,
+        gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
+        trajectory=trajectory, ik=ik,
+        mechanism=mechanism, locked=joints.locked, profiles=profiles,
+        tables=_profile_tables(path, trajectory, profiles), joint_limits=joints.limits,
+        saturate_effort=joints.saturate_effort, urdf_dynamics=joints.urdf_dynamics,
+        joint_dynamics=joints.dynamics, xacro_args=xacro_args, srdf=srdf, states=states,
+        srdf_configurations=named_states, chain=joints.chain)
+    if not named_states:
+        return description
+    description = _resolve_states(description)
+    if len({len(v) for v in description.configurations.values()}) != 1:
+        conf.fail("home", "every configuration needs as many joint values as the model has joints, got "
+                          f"{sorted({len(v) for v in description.configurations.values()})}")
+    return description
 
+
+#: The top-level keys of a robot description.
+TOP_KEYS = frozenset({"name", "summary", "urdf", "mechanism", "blocks", "task", "configurations", "gravity",
+                      "payload", "gains", "default_gains", "trajectory", "trajectories", "ik", "joints",
+                      "xacro_args", "srdf"})
+
+
+def _toml(path: Path) -> dict:
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise DescriptionError(path, "(file)", "does not exist") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DescriptionError(path, "(syntax)", str(exc)) from None
+
+
+def _read_source(top: _Table, urdf: str | Path | None, copy: bool
+                 ) -> tuple[Path | None, Planar3RRPMechanism | None, dict[str, str]]:
+    """``urdf`` (and ``xacro_args``) or ``[mechanism]``: the URDF's path, the mechanism, the
+    xacro arguments as strings (none for a copy: it is expanded already)."""
+    mech = top.table("mechanism", None)
+    if mech is None:
+        urdf = _urdf(top, top.path, urdf)
+        arguments = top.table("xacro_args", None)
+        if arguments is None:
+            return urdf, None, {}
+        if not _named_urdf(top).endswith(".xacro"):
+            top.fail("xacro_args", f"only for a .xacro urdf, and {_named_urdf(top)!r} is none: drop them")
+        for key, value in arguments.data.items():
+            if isinstance(value, (dict, list)):
+                arguments.fail(key, f"must be a string or a number, got {value!r}")
+        return urdf, None, ({} if copy else {key: str(value).lower() if isinstance(value, bool) else str(value)
+                                             for key, value in arguments.data.items()})
+    if "urdf" in top.data:
+        top.fail("mechanism", "a robot has either a `urdf` or a [mechanism] table, not both")
+    for key in ("xacro_args", "srdf"):
+        if key in top.data:
+            top.fail(key, "only for a robot with a `urdf`")
+    kind = mech.string("kind", _REQUIRED)
+    if kind not in MECHANISMS:
+        mech.fail("kind", f"unknown mechanism {kind!r} (known: {', '.join(sorted(MECHANISMS))})")
+    return None, MECHANISMS[kind](mech, kind), {}
+
+
+def _read_task(top: _Table, mechanism: Planar3RRPMechanism | None) -> TaskSpace:
+    """``[task]``: a frame's position axes and orientation axes, or a mechanism's own coordinates."""
     task = top.table("task", _REQUIRED)
-    if mechanism is None:
-        task.unknown({"frame", "coordinates", "axes", "orientation_axes"})
-        coordinates = task.strings("coordinates", _REQUIRED)
-        axes = _axes(task, "axes", list(range(len(coordinates))), "world axes")
-        if len(axes) != len(coordinates):
-            task.fail("axes", f"must have {len(coordinates)} values, got {len(axes)} (one per coordinate)")
-        orientation = _axes(task, "orientation_axes", [], "axes of the frame") if "orientation_axes" in task.data \
-            else ()
-        if "orientation_axes" in task.data and not orientation:
-            task.fail("orientation_axes", "must name at least one axis (leave the key out for a position task)")
-        task_space = TaskSpace(task.string("frame", _REQUIRED), coordinates, axes, orientation)
-    else:                       # the mechanism's own task coordinates: planar x, y along world x, y,
+    if mechanism is not None:   # the mechanism's own task coordinates: planar x, y along world x, y,
         task.unknown({"frame", "coordinates"})                       # theta about world z
         coordinates = task.strings("coordinates", _REQUIRED)
-        task_space = TaskSpace(task.string("frame", "end_effector"), coordinates, (0, 1, 2)[:len(coordinates)])
+        return TaskSpace(task.string("frame", "end_effector"), coordinates, (0, 1, 2)[:len(coordinates)])
+    task.unknown({"frame", "coordinates", "axes", "orientation_axes"})
+    coordinates = task.strings("coordinates", _REQUIRED)
+    axes = _axes(task, "axes", list(range(len(coordinates))), "world axes")
+    if len(axes) != len(coordinates):
+        task.fail("axes", f"must have {len(coordinates)} values, got {len(axes)} (one per coordinate)")
+    orientation = _axes(task, "orientation_axes", [], "axes of the frame") if "orientation_axes" in task.data \
+        else ()
+    if "orientation_axes" in task.data and not orientation:
+        task.fail("orientation_axes", "must name at least one axis (leave the key out for a position task)")
+    return TaskSpace(task.string("frame", _REQUIRED), coordinates, axes, orientation)
 
-    srdf = None if urdf is None else _srdf(top, path, srdf)
-    states = {}
-    if srdf is not None:
-        from .urdf import UrdfError, srdf_states
-        try:
-            states = srdf_states(srdf)
-        except UrdfError as exc:
-            if copy:
-                raise
-            top.fail("srdf", str(exc))
-    conf = top.table("configurations", _REQUIRED)
+
+def _read_states(top: _Table, srdf: Path | None, copy: bool) -> dict:
+    """The SRDF's group states (none without an SRDF)."""
+    if srdf is None:
+        return {}
+    from .urdf import UrdfError, srdf_states
+    try:
+        return srdf_states(srdf)
+    except UrdfError as exc:
+        if copy:
+            raise
+        top.fail("srdf", str(exc))
+
+
+def _read_configurations(conf: _Table, srdf: Path | None) -> tuple[dict, dict]:
+    """``[configurations]``: the configurations given as numbers, and those naming an SRDF state
+    (name: state)."""
     named_states = {k: v[len(SRDF_PREFIX):] for k, v in conf.data.items()
                     if isinstance(v, str) and v.startswith(SRDF_PREFIX)}
     for k, v in named_states.items():
@@ -666,7 +720,11 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
     lengths = {len(v) for v in configurations.values()}
     if len(lengths) > 1:
         conf.fail("home", f"every configuration needs the same number of joints, got {sorted(lengths)}")
+    return configurations, named_states
 
+
+def _read_gravity(top: _Table) -> tuple[float, tuple[float, ...]]:
+    """``[gravity]``: magnitude (m/s^2) and unit direction."""
     grav = top.table("gravity", {})
     grav.unknown({"magnitude", "direction"})
     magnitude = grav.number("magnitude", 9.81, low=0.0)
@@ -674,13 +732,20 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
     norm = math.sqrt(sum(d * d for d in direction))
     if abs(norm - 1.0) > 1e-12:
         grav.fail("direction", f"must be a unit vector, got length {norm:.6g}")
+    return magnitude, direction
 
-    payload = None
+
+def _read_payload(top: _Table, task_space: TaskSpace) -> Payload | None:
+    """``[payload]`` (on the task frame unless it names one)."""
     pay = top.table("payload", None)
-    if pay is not None:
-        pay.unknown({"mass", "frame"})
-        payload = Payload(pay.number("mass", _REQUIRED, low=0.0), pay.string("frame", task_space.frame))
+    if pay is None:
+        return None
+    pay.unknown({"mass", "frame"})
+    return Payload(pay.number("mass", _REQUIRED, low=0.0), pay.string("frame", task_space.frame))
 
+
+def _read_gains(top: _Table) -> tuple[dict[str, Gains], str]:
+    """``[gains.<set>]`` (checked by the controller's rules) and ``default_gains``."""
     gains_table = top.table("gains", _REQUIRED)
     gains = {}
     for set_name in gains_table.data:
@@ -697,7 +762,11 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
     if default_gains not in gains:
         top.fail("default_gains", f"names no gain set of this robot: {default_gains!r} (its sets: "
                                   f"{', '.join(gains)})")
+    return gains, default_gains
 
+
+def _read_trajectories(top: _Table, blocks: tuple[str, ...]) -> tuple[Choice | None, dict[str, Choice]]:
+    """``[trajectory]`` (exactly with the trajectory block) and the named ``[trajectories.<name>]``."""
     trajectory_table = top.table("trajectory", _REQUIRED if "trajectory" in blocks else None)
     if trajectory_table is not None and "trajectory" not in blocks:
         top.fail("trajectory", "a [trajectory] table is needed exactly when `blocks` lists 'trajectory'")
@@ -711,43 +780,61 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
             if not re.fullmatch(r"[a-z][a-z0-9_]*", profile):
                 named.fail(profile, "a profile's name is lower-case letters, digits and _ (it names an FMU)")
             profiles[profile] = _choice(named.table(profile, _REQUIRED), "profile")
-    ik_table = top.table("ik", None)
-    ik = _choice(ik_table, "solver") if ik_table is not None else None
-    if ("ik" in blocks) != (ik is not None):
-        top.fail("ik", "an [ik] table is needed exactly when `blocks` lists 'ik'")
+    return trajectory, profiles
 
-    locked, limits, saturate, chain, losses, urdf_dynamics = {}, {}, False, None, {}, False
+
+@dataclass(frozen=True)
+class _Joints:
+    """What ``[joints]`` gives (its defaults where the table is missing)."""
+
+    locked: dict = field(default_factory=dict)
+    limits: dict = field(default_factory=dict)
+    saturate_effort: bool = False
+    chain: tuple[str, ...] | None = None
+    dynamics: dict = field(default_factory=dict)
+    urdf_dynamics: bool = False
+
+
+def _read_joints(top: _Table, mechanism: Planar3RRPMechanism | None) -> _Joints:
+    """``[joints]``: locked joints, limits, losses, the kept chain, effort saturation."""
     joints = top.table("joints", None)
-    if joints is not None:
-        if mechanism is not None:
-            top.fail("joints", "a [mechanism] describes its joints in its own table")
-        joints.unknown({"locked", "limits", "saturate_effort", "chain", "dynamics", "urdf_dynamics"})
-        if "chain" in joints.data:
-            chain = joints.strings("chain", _REQUIRED)
-            if len(chain) != 2:
-                joints.fail("chain", f"must be two link names [base, tip], got {list(chain)}")
-        held = joints.table("locked", {})
-        locked = {joint: held.number(joint, _REQUIRED) for joint in held.data}
-        given = joints.table("limits", {})
-        for joint in given.data:
-            table = given.table(joint, _REQUIRED)
-            table.unknown(set(LIMIT_KEYS))
-            limits[joint] = {key: _limit(table, key) for key in LIMIT_KEYS if key in table.data}
-            low, high = limits[joint].get("lower", -math.inf), limits[joint].get("upper", math.inf)
-            if not low < high:
-                table.fail("upper", f"must exceed lower, got {high!r} <= {low!r}")
-        given = joints.table("dynamics", {})
-        for joint in given.data:
-            table = given.table(joint, _REQUIRED)
-            table.unknown(set(DYNAMICS_KEYS))
-            losses[joint] = {key: table.number(key, _REQUIRED, low=0.0) for key in DYNAMICS_KEYS if key in table.data}
-        saturate = joints.data.get("saturate_effort", False)
-        if not isinstance(saturate, bool):
-            joints.fail("saturate_effort", f"must be true or false, got {saturate!r}")
-        urdf_dynamics = joints.data.get("urdf_dynamics", False)
-        if not isinstance(urdf_dynamics, bool):
-            joints.fail("urdf_dynamics", f"must be true or false, got {urdf_dynamics!r}")
+    if joints is None:
+        return _Joints()
+    if mechanism is not None:
+        top.fail("joints", "a [mechanism] describes its joints in its own table")
+    joints.unknown({"locked", "limits", "saturate_effort", "chain", "dynamics", "urdf_dynamics"})
+    chain = None
+    if "chain" in joints.data:
+        chain = joints.strings("chain", _REQUIRED)
+        if len(chain) != 2:
+            joints.fail("chain", f"must be two link names [base, tip], got {list(chain)}")
+    held = joints.table("locked", {})
+    locked = {joint: held.number(joint, _REQUIRED) for joint in held.data}
+    limits, losses = {}, {}
+    given = joints.table("limits", {})
+    for joint in given.data:
+        table = given.table(joint, _REQUIRED)
+        table.unknown(set(LIMIT_KEYS))
+        limits[joint] = {key: _limit(table, key) for key in LIMIT_KEYS if key in table.data}
+        low, high = limits[joint].get("lower", -math.inf), limits[joint].get("upper", math.inf)
+        if not low < high:
+            table.fail("upper", f"must exceed lower, got {high!r} <= {low!r}")
+    given = joints.table("dynamics", {})
+    for joint in given.data:
+        table = given.table(joint, _REQUIRED)
+        table.unknown(set(DYNAMICS_KEYS))
+        losses[joint] = {key: table.number(key, _REQUIRED, low=0.0) for key in DYNAMICS_KEYS if key in table.data}
+    saturate = joints.data.get("saturate_effort", False)
+    if not isinstance(saturate, bool):
+        joints.fail("saturate_effort", f"must be true or false, got {saturate!r}")
+    urdf_dynamics = joints.data.get("urdf_dynamics", False)
+    if not isinstance(urdf_dynamics, bool):
+        joints.fail("urdf_dynamics", f"must be true or false, got {urdf_dynamics!r}")
+    return _Joints(locked, limits, saturate, chain, losses, urdf_dynamics)
 
+
+def _profile_tables(path: Path, trajectory: Choice | None, profiles: dict[str, Choice]) -> tuple[str, ...]:
+    """The data tables (CSV, beside the TOML) the profiles' parameters name, each once."""
     tables = []
     for where, choice in [("trajectory", trajectory)] + [(f"trajectories.{k}", v) for k, v in profiles.items()]:
         for key, value in (choice.parameters.items() if choice is not None else ()):
@@ -759,22 +846,7 @@ def read(path: str | Path, urdf: str | Path | None = None, srdf: str | Path | No
                     raise DescriptionError(path, f"{where}.{key}", "a table lives in the robot's folder: give "
                                                                    f"its path relative to the TOML, got {value!r}")
                 tables.append(value)
-
-    description = RobotDescription(
-        name=name, summary=top.string("summary", _REQUIRED), path=path, urdf=urdf, blocks=blocks,
-        task=task_space, configurations=configurations, gravity=magnitude,
-        gravity_direction=direction, payload=payload, gains=gains, default_gains=default_gains,
-        trajectory=trajectory, ik=ik,
-        mechanism=mechanism, locked=locked, profiles=profiles, tables=tuple(dict.fromkeys(tables)),
-        joint_limits=limits, saturate_effort=saturate, urdf_dynamics=urdf_dynamics, joint_dynamics=losses, xacro_args=xacro_args, srdf=srdf, states=states,
-        srdf_configurations=named_states, chain=chain)
-    if not named_states:
-        return description
-    description = _resolve_states(description)
-    if len({len(v) for v in description.configurations.values()}) != 1:
-        conf.fail("home", "every configuration needs as many joint values as the model has joints, got "
-                          f"{sorted({len(v) for v in description.configurations.values()})}")
-    return description
+    return tuple(dict.fromkeys(tables))
 
 
 #: A configuration given as ``"srdf:<state>"`` is the SRDF's group_state of that name.

@@ -35,7 +35,8 @@ def spec(experiment: str = "chess-pd", fmu_dir: str | Path = "fmus") -> dict:
     ``joint`` (1-based Pinocchio joint index) and ``lever`` (m, the point mass's position in
     that joint's frame).
     """
-    from robofmu.components.trajectory import SNAP_TOLERANCE, WaypointTrajectory
+    from robofmu.components.profile import SNAP_TOLERANCE
+    from robofmu.components.trajectory import WaypointTrajectory
     from robofmu.system.plan import step_count
     from robofmu.system.experiment import load
     from robofmu.system.studies.replica import InProcessDiagram

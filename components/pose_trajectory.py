@@ -19,7 +19,8 @@ import numpy as np
 import pinocchio as pin
 
 from .orientation import UNIT_TOLERANCE, rotation_of
-from .trajectory import LSPBLaw, TrapezoidLaw, _finite, _finite_vector, _g, _positive, _Profile, schedule, snap_to
+from .profile import Profile, finite, finite_vector, positive, shown, snap_to
+from .time_law import LSPBLaw, TrapezoidLaw, schedule
 
 __all__ = ["POSE_COLUMNS", "PoseLine", "PoseWaypoints"]
 
@@ -29,7 +30,7 @@ POSE_COLUMNS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 LIMITS = {"v_max": "m/s", "a_max": "m/s2", "omega_max": "rad/s", "alpha_max": "rad/s2"}
 
 
-class _PoseProfile(_Profile):
+class _PoseProfile(Profile):
     dim = 3
 
     def evaluate(self, t: float, snap: bool = True):
@@ -53,7 +54,7 @@ class PoseLine(_PoseProfile):
 
     One scalar s(t) runs from 0 to 1, at rest at both ends: by LSPB in ``duration`` (cruise speed
     ``cruise_factor`` x the mean speed), or, given the four limits instead, at minimum time on a
-    trapezoid (:class:`~.trajectory.TrapezoidLaw`) whose rate and acceleration bounds are the
+    trapezoid (:class:`~.time_law.TrapezoidLaw`) whose rate and acceleration bounds are the
     tightest the limits allow: sd <= min(v_max / |d|, omega_max / |r|), |sdd| <= min(a_max / |d|,
     alpha_max / |r|). With d = ``displacement``, r = ``rotation`` (in the start frame) and R0 the
     start orientation:
@@ -99,20 +100,20 @@ class PoseLine(_PoseProfile):
     def __init__(self, start, displacement, start_quaternion, rotation, duration: float | None = None,
                  cruise_factor: float = 1.5, *, v_max: float | None = None, a_max: float | None = None,
                  omega_max: float | None = None, alpha_max: float | None = None):
-        self.start = _finite_vector(start, "start", 3)
-        self.displacement = _finite_vector(displacement, "displacement", 3)
-        q0 = _finite_vector(start_quaternion, "start_quaternion", 4)
+        self.start = finite_vector(start, "start", 3)
+        self.displacement = finite_vector(displacement, "displacement", 3)
+        q0 = finite_vector(start_quaternion, "start_quaternion", 4)
         norm = float(np.linalg.norm(q0))
         if not abs(norm - 1.0) <= UNIT_TOLERANCE:
             raise ValueError(f"start_quaternion: must be a unit quaternion (x, y, z, w) (norm within "
-                             f"{_g(UNIT_TOLERANCE)} of 1), got {q0.tolist()} of norm {_g(norm)}")
+                             f"{shown(UNIT_TOLERANCE)} of 1), got {q0.tolist()} of norm {shown(norm)}")
         self.start_quaternion = q0 / norm
-        self.rotation = _finite_vector(rotation, "rotation", 3)
+        self.rotation = finite_vector(rotation, "rotation", 3)
         self.angle = float(np.linalg.norm(self.rotation))
         if self.angle > math.pi + 1e-12:          # pi itself, within rounding of the vector's norm
             shorter = self.rotation * (1.0 - 2.0 * math.pi / self.angle) if self.angle < 2.0 * math.pi else None
             hint = f" (here {[round(v, 6) for v in shorter.tolist()]})" if shorter is not None else ""
-            raise ValueError(f"rotation: its angle |rotation| = {_g(self.angle)} rad exceeds pi; give the shortest "
+            raise ValueError(f"rotation: its angle |rotation| = {shown(self.angle)} rad exceeds pi; give the shortest "
                              f"rotation to the same end orientation, angle <= pi{hint}")
         limits = {"v_max": v_max, "a_max": a_max, "omega_max": omega_max, "alpha_max": alpha_max}
         self.cruise_factor = float(cruise_factor)
@@ -149,7 +150,7 @@ class PoseLine(_PoseProfile):
         if missing:
             raise ValueError(f"give duration (an LSPB time law) or all four limits {', '.join(LIMITS)} "
                              f"(minimum time); missing: {', '.join(missing)}")
-        bounds = {k: _positive(v, k, LIMITS[k]) for k, v in limits.items()}
+        bounds = {k: positive(v, k, LIMITS[k]) for k, v in limits.items()}
         distance = float(np.linalg.norm(self.displacement))
         if distance == 0.0 and self.angle == 0.0:
             raise ValueError("displacement and rotation are both zero: a move at minimum time needs something "
@@ -160,30 +161,30 @@ class PoseLine(_PoseProfile):
             acceleration = min(bounds["a_max"] / distance if distance else math.inf,
                                bounds["alpha_max"] / self.angle if self.angle else math.inf)
         law = TrapezoidLaw(1.0, rate, acceleration)
-        given = ", ".join(f"{k} = {_g(v)} {LIMITS[k]}" for k, v in bounds.items())
+        given = ", ".join(f"{k} = {shown(v)} {LIMITS[k]}" for k, v in bounds.items())
         if not law.finite or not law.duration > 0.0:
-            raise ValueError(f"{given}: a move of {_g(distance)} m and {_g(self.angle)} rad would take "
-                             f"{_g(law.duration)} s, not a positive finite time; give limits nearer the move's size")
+            raise ValueError(f"{given}: a move of {shown(distance)} m and {shown(self.angle)} rad would take "
+                             f"{shown(law.duration)} s, not a positive finite time; give limits nearer the move's size")
         return law
 
     def _check_finite(self) -> None:
         """Refuse parameters whose reference overflows (ValueError naming them): the end point
         (start, displacement), the peak speeds and accelerations (displacement, rotation with the
         time law)."""
-        if not _finite(self.end):
+        if not finite(self.end):
             k = int(np.flatnonzero(~np.isfinite(self.end))[0])
-            raise ValueError(f"start[{k + 1}] = {_g(self.start[k])} and displacement[{k + 1}] = "
-                             f"{_g(self.displacement[k])} m: the end point's coordinate {k + 1} would be "
-                             f"{_g(self.end[k])} (beyond the largest float)")
+            raise ValueError(f"start[{k + 1}] = {shown(self.start[k])} and displacement[{k + 1}] = "
+                             f"{shown(self.displacement[k])} m: the end point's coordinate {k + 1} would be "
+                             f"{shown(self.end[k])} (beyond the largest float)")
         sd, sdd = self.time_law.peak_rate, self.time_law.peak_acceleration
         with np.errstate(all="ignore"):
             peaks = {"displacement": (self.displacement, "m/s", "m/s2"),
                      "rotation": (self.world_rotation, "rad/s", "rad/s2")}
             for name, (vector, v_unit, a_unit) in peaks.items():
                 length = float(np.linalg.norm(vector))
-                if not _finite(length * sd, length * sdd):
-                    raise ValueError(f"{name} and duration = {_g(self.duration)} s: the peak speed would be "
-                                     f"{_g(length * sd)} {v_unit} and acceleration {_g(length * sdd)} {a_unit} "
+                if not finite(length * sd, length * sdd):
+                    raise ValueError(f"{name} and duration = {shown(self.duration)} s: the peak speed would be "
+                                     f"{shown(length * sd)} {v_unit} and acceleration {shown(length * sdd)} {a_unit} "
                                      f"(not finite); give a smaller {name} or a longer duration")
 
     def path(self, t: float) -> tuple[float, float, float]:
@@ -281,7 +282,7 @@ class PoseWaypoints(_PoseProfile):
                                self.cruise_factor)
             except ValueError as exc:
                 raise ValueError(f"waypoints rows {i + 1} to {i + 2}, durations[{i + 1}] = "
-                                 f"{_g(self.durations[i])} s (move {i + 1}): {exc}") from None
+                                 f"{shown(self.durations[i])} s (move {i + 1}): {exc}") from None
             self.legs.append(leg)
             quaternion = leg.end_quaternion
         # each segment evaluates a leg at (t - offset): a pause, its move's leg past that leg's end

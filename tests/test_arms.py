@@ -12,7 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from robofmu.components.robots import load_description
-from robofmu.components.trajectory import lspb
+from robofmu.components.time_law import lspb
 from robofmu.system import experiment
 from robofmu.system.analysis import tracking_metrics
 from robofmu.system.master import Master

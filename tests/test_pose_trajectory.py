@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from robofmu.components.pose_trajectory import PoseLine, PoseWaypoints
-from robofmu.components.trajectory import lspb
+from robofmu.components.time_law import lspb
 
 #: The ur5-like case: tool z pointing down, turned a quarter about its own z on the way.
 UR5_QUATERNION = Rotation.from_matrix([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).as_quat()

@@ -15,7 +15,8 @@ from robofmu.components.blocks import make_block
 from robofmu.components.preflight import check_reference
 from robofmu.components.robots import DescriptionError, load_description
 from robofmu.components.robots.description import read
-from robofmu.components.trajectory import StraightLine, WaypointTrajectory, lspb
+from robofmu.components.time_law import lspb
+from robofmu.components.trajectory import StraightLine, WaypointTrajectory
 
 from robot_files import del_key, independent_model, set_key
 

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from robofmu.components.blocks.text import format_matrix, format_vector, parse_matrix, parse_vector
-from robofmu.components.trajectory import WaypointTrajectory, lspb
+from robofmu.components.time_law import lspb
+from robofmu.components.trajectory import WaypointTrajectory
 
 
 def test_lspb_closed_form_default_cruise():

@@ -12,7 +12,7 @@ from robofmu.components import robot_data_hash
 from robofmu.components.blocks import make_block
 from robofmu.components.robots import load_description
 from robofmu.components.robots.description import DescriptionError, read
-from robofmu.components.trajectory import read_table
+from robofmu.components.waypoint_table import read_table
 
 from robot_files import set_key
 

@@ -27,7 +27,8 @@ from dataclasses import replace
 from ..orientation import COMPONENTS, quaternion_of
 from ..parameters import Parameter
 from ..pose_trajectory import POSE_COLUMNS, PoseLine, PoseWaypoints
-from ..trajectory import Circle, StraightLine, SynchronizedBangBang, WaypointTrajectory, read_table
+from ..trajectory import Circle, StraightLine, SynchronizedBangBang, WaypointTrajectory
+from ..waypoint_table import read_table
 from .base import Block
 from .text import format_matrix, format_vector, parse_matrix, parse_vector
 

@@ -15,7 +15,7 @@ import scipy.linalg
 
 from robofmu.components.robots import load_description, load_model
 from robofmu.system.commands import step as step_command
-from robofmu.system.stepresponse import experiment, linear, sampled, steppable_robots
+from robofmu.system.stepresponse import comparison, experiment, linear, sampled, steppable_robots
 
 H = 1e-3              # base step (s)
 TS = 2e-3             # the acceptance's controller sample time (s)
@@ -168,7 +168,7 @@ def test_sampled_delayed_step_matches_the_discrete_prediction(fmu_root, robot_na
     joints = list(range(1, load_model(robot_name).n + 1))
     result = experiment.cosimulate_step(fmu_root, **gains, robot=robot_name, h=H, stop_time=STOP,
                                         sample_time=TS, delay_steps=1)
-    c = experiment.compare(result)
+    c = comparison.compare(result)
     assert (c.sample_time, c.delay_steps, c.joints) == (TS, 1, joints)
     assert c.max_deviation("sampled") < 1.0, c.table()
     assert c.best() == "sampled" and not c.divergence and not c.friction
@@ -199,7 +199,7 @@ def test_rrp_gravity_coupling_is_what_the_decoupled_prediction_misses(fmu_root):
     gains = load_description("rrp").gain_set("pd").as_dict()
     misses = {}
     for ts, d in ((1e-3, 0), (2e-3, 1)):
-        c = experiment.compare(experiment.cosimulate_step(fmu_root, **gains, robot="rrp", h=H, stop_time=STOP,
+        c = comparison.compare(experiment.cosimulate_step(fmu_root, **gains, robot="rrp", h=H, stop_time=STOP,
                                                           sample_time=ts, delay_steps=d))
         info = c.result.info
         middle = (np.asarray(info["q0"]) + np.asarray(info["q_ref"])) / 2
@@ -225,7 +225,7 @@ def test_without_rate_options_the_single_rate_run_is_unchanged(fmu_root):
     after = experiment.cosimulate_step(fmu_root, 400.0, 40.0, 0.0, **kwargs, sample_time=H, delay_steps=0)
     np.testing.assert_array_equal(before.data, after.data)
     assert "sample_time" not in before.info and after.info["sample_time"] == H
-    old, new = experiment.compare(before), experiment.compare(after)
+    old, new = comparison.compare(before), comparison.compare(after)
     n = len(after.info["q0"])
     uncoupled = sampled.predict_coupled(400.0, 40.0, 0.0, new.time - new.time[0], new.amplitudes, sample_time=H,
                                         h=H, startup="first", stiffness=np.zeros((n, n)))
@@ -242,7 +242,7 @@ def test_kp_limit_at_4_ms_one_sample_late_holds_in_cosimulation(fmu_root, tmp_pa
     q = kd * ts
     limit = sampled.largest_stable_kp(kd, ts, 1)
     assert limit == pytest.approx((2 * q - 3 + math.sqrt(9 - 8 * q)) / ts**2, rel=1e-9)          # 6155.5
-    inside = experiment.compare(experiment.cosimulate_step(fmu_root, 0.9 * limit, kd, 0.0, robot="rpp", h=H,
+    inside = comparison.compare(experiment.cosimulate_step(fmu_root, 0.9 * limit, kd, 0.0, robot="rpp", h=H,
                                                            stop_time=1.0, sample_time=ts, delay_steps=1))
     assert inside.kp_limit == pytest.approx(limit, rel=1e-12) and inside.spectral_radius < 1.0
     assert not inside.divergence
@@ -259,7 +259,7 @@ def test_kp_limit_at_4_ms_one_sample_late_holds_in_cosimulation(fmu_root, tmp_pa
     assert f"largest stable kp {limit:.6g}" in out and "110.0 % of it" in out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["step_h1ms_ts4ms_d1.png", "step_h1ms_ts4ms_d1_compare.csv",
                                                           "step_h1ms_ts4ms_d1_cosim.csv"]
-    outside = experiment.compare(experiment.cosimulate_step(fmu_root, 1.1 * limit, kd, 0.0, robot="rpp", h=H,
+    outside = comparison.compare(experiment.cosimulate_step(fmu_root, 1.1 * limit, kd, 0.0, robot="rpp", h=H,
                                                             stop_time=0.6, sample_time=ts, delay_steps=1))
     assert outside.spectral_radius > 1.0 and outside.divergence.startswith("UNSTABLE")
     assert envelope(outside, 0.4, 0.6) / envelope(outside, 0.2, 0.4) == pytest.approx(
@@ -288,7 +288,7 @@ def test_unknown_coulomb_friction_stops_short_by_its_closed_form(fmu_root):
                 for name, value in (("friction", c), ("friction_velocity", v_s))}
     result = experiment.cosimulate_step(fmu_root, kp, kd, 0.0, robot="rpp", h=H, stop_time=1.0, sample_time=TS,
                                         delay_steps=1, parameters=settings)
-    c = experiment.compare(result)
+    c = comparison.compare(result)
     inertia = independent_inertia("rpp", result.info["q_ref"])
     assert [f.joint for f in c.friction] == [1, 3]
     for f in c.friction:

@@ -14,7 +14,7 @@ from robofmu.components.robots import load_description, load_model
 from robofmu.system import defaults
 from robofmu.system import stepresponse as sr
 from robofmu.system.commands import step as step_command
-from robofmu.system.stepresponse import design, experiment, linear, metrics, sampled
+from robofmu.system.stepresponse import comparison, design, experiment, figures, linear, metrics, sampled
 
 PD = dict(kp=400.0, kd=20.0, ki=0.0)
 PID = dict(kp=600.0, kd=25.0, ki=75.0)
@@ -25,7 +25,7 @@ ROBOTS = ("chess", "rrp", "rpp")
 
 def test_package_reexports_every_public_name():
     for name in sr.__all__:
-        module = next(m for m in (linear, metrics, design, sampled, experiment) if name in m.__all__)
+        module = next(m for m in (linear, metrics, design, sampled, experiment, comparison, figures) if name in m.__all__)
         assert getattr(sr, name) is getattr(module, name), name
     for name in ("design_gains", "compare", "cosimulate_step", "plot_comparison", "default_amplitudes",
                  "step_metrics", "predict", "error_dynamics", "discrete_prediction", "write_csv",
@@ -73,7 +73,7 @@ def test_zoh_of_continuous_loop_samples_it_exactly_sampled_loop_differs_by_o_h()
 def test_cosimulated_step_matches_sampled_data_prediction(fmu_root, gains, h):
     result = experiment.cosimulate_step(fmu_root, **gains, robot="chess", amplitude=HEIGHT, h=h,
                                         stop_time=0.8)                                   # the Master
-    c = experiment.compare(result)
+    c = comparison.compare(result)
     # every joint, every sample, within 1 % of the amplitude
     assert c.max_deviation("sampled") < 1.0, c.table()
     assert c.best() == "sampled"
@@ -98,7 +98,7 @@ def test_cosimulated_step_matches_sampled_data_prediction(fmu_root, gains, h):
 def test_single_joint_step_leaves_the_others_and_derivative_kick_model_is_wrong(fmu_root):
     result = experiment.cosimulate_step(fmu_root, **PD, robot="chess", amplitude=-0.03, h=2e-3, stop_time=0.6,
                                         joint=3)
-    c = experiment.compare(result)
+    c = comparison.compare(result)
     assert c.joints == [3] and c.max_deviation("sampled") < 1.0
     assert c.crosstalk_percent < 0.5          # decoupled by the computed-torque law
     t = c.time
@@ -194,7 +194,7 @@ def test_designed_gains_hit_request_in_cosimulation(fmu_root, ts, os_, ki_ratio,
     hs = 1e-3
     result = experiment.cosimulate_step(fmu_root, d.kp, d.kd, d.ki, robot="chess", amplitude=HEIGHT, h=hs,
                                 stop_time=round(3 * ts / hs) * hs)
-    c = experiment.compare(result)
+    c = comparison.compare(result)
     for j in c.joints:
         m = c.metrics[f"joint {j}"]
         assert m.settling_time == pytest.approx(ts, rel=0.05), (j, m)
@@ -235,7 +235,7 @@ def test_every_robot_step_matches_sampled_data_prediction(fmu_root, robot_name, 
     model = load_model(robot_name)
     gains = load_description(robot_name).gain_set(gain_set).as_dict()
     result = experiment.cosimulate_step(fmu_root, **gains, robot=robot_name, h=1e-3, stop_time=0.8)
-    c = experiment.compare(result)
+    c = comparison.compare(result)
     assert c.joints == list(range(1, model.n + 1))
     np.testing.assert_allclose(c.q0, model.configuration("home"))
     for j, unit in zip(c.joints, model.joint_units(0)):
@@ -274,15 +274,15 @@ def test_step_setup_defaults_sequences_and_mistakes():
 
 def test_comparison_csv_and_figure_carry_the_model_units(fmu_root, tmp_path):
     result = experiment.cosimulate_step(fmu_root, 400.0, 40.0, robot="rrp", joint=[2, 3], h=5e-3, stop_time=0.3)
-    c = experiment.compare(result)
+    c = comparison.compare(result)
     assert c.joints == [2, 3] and c.crosstalk_joints == [1] and c.crosstalk.shape == (61, 1)
     assert c.predictions["sampled"].shape == (61, 2) and c.deviation["sampled"].shape == (2,)
     assert "q2 +0.02 rad, q3 -0.02 m" in c.table()
-    path = experiment.write_csv(c, tmp_path / "compare.csv")
+    path = comparison.write_csv(c, tmp_path / "compare.csv")
     header = path.read_text().splitlines()[0].split(",")
     assert header[:3] == ["time [s]", "cosim_q2 [rad]", "cosim_q3 [m]"]
     assert header[-3:] == ["tau1 [N.m]", "tau2 [N.m]", "tau3 [N]"]
-    figure = experiment.plot_comparison(c, tmp_path)
+    figure = figures.plot_comparison(c, tmp_path)
     assert figure.name == "step_rrp_kp400_kd40_ki0_h5ms_j2-3.png" and figure.stat().st_size > 0
 
 
@@ -367,7 +367,7 @@ def test_step_command_defaults_come_from_the_shared_defaults_and_the_description
 
 @pytest.mark.slow
 def test_demo_cases_one_per_gain_set(fmu_root, tmp_path):
-    cases = experiment.demo_cases("chess", fmu_root, tmp_path, h=5e-3, stop_time=0.5)
+    cases = figures.demo_cases("chess", fmu_root, tmp_path, h=5e-3, stop_time=0.5)
     assert [label.split(":")[0] for label, _ in cases] == list(load_description("chess").gains)
     for label, (c, figure) in cases:
         assert c.max_deviation("sampled") < 1.0 and figure.parent == tmp_path and figure.is_file()

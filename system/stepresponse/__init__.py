@@ -24,19 +24,22 @@ response of each joint, revolute (rad) or prismatic (m), is predicted by linear 
     Gains from a requested settling time and overshoot (:func:`design_gains`).
 :mod:`.experiment`
     The two-block step diagram of any robot on the project's
-    :class:`~robofmu.system.master.Master` (:func:`step_system`, :func:`cosimulate_step`), its
-    :class:`Comparison` with the predictions (:func:`compare`; :class:`FrictionMiss`), CSV and figure
-    (:func:`write_csv`, :func:`plot_comparison`); :func:`demo_cases` for the report.
+    :class:`~robofmu.system.master.Master` (:func:`step_system`, :func:`cosimulate_step`).
+:mod:`.comparison`
+    Its :class:`Comparison` with the predictions (:func:`compare`; :class:`FrictionMiss`) and CSV
+    (:func:`write_csv`).
+:mod:`.figures`
+    Its figure (:func:`plot_comparison`); :func:`demo_cases` for the report.
 
 The ``robofmu step`` command is :mod:`robofmu.system.commands.step`.
 """
 from __future__ import annotations
 
 from robofmu.system.stepresponse.design import GainDesign, design_gains
-from robofmu.system.stepresponse.experiment import (CONTROLLER, DEFAULT_AMPLITUDE, PLANT, Comparison, FrictionMiss,
-                                                    StepSetup, compare, cosimulate_step, default_amplitudes,
-                                                    demo_cases, plot_comparison, step_setup, step_system,
-                                                    steppable_robots, write_csv)
+from robofmu.system.stepresponse.comparison import Comparison, FrictionMiss, compare, write_csv
+from robofmu.system.stepresponse.experiment import (CONTROLLER, DEFAULT_AMPLITUDE, PLANT, StepSetup, cosimulate_step,
+                                                    default_amplitudes, step_setup, step_system, steppable_robots)
+from robofmu.system.stepresponse.figures import demo_cases, plot_comparison
 from robofmu.system.stepresponse.linear import (MODEL_TEXT, MODELS, discrete_prediction, error_dynamics, predict,
                                                 zoh_prediction)
 from robofmu.system.stepresponse.sampled import (friction_creep_time, friction_steady_state_error,

@@ -10,10 +10,10 @@ Runners (each in a fresh child process, one after the other):
 - ``in-process``: :meth:`robofmu.system.studies.replica.InProcessDiagram.sampled`, the FMUs' own
   FMI-free block logic called in the master's order, the same outputs recorded into a
   preallocated array: it reproduces the master exactly (the correctness lines print the difference);
-- ``libcosim``: :func:`robofmu.system.interop.ssp.run_ssp_libcosim` on ``export_ssp(system)``
+- ``libcosim``: :func:`robofmu.system.interop.libcosim.run_ssp_libcosim` on ``export_ssp(system)``
   (libcosim's fixed-step, Jacobi-like algorithm; Real outputs recorded by a time-series
   observer, Booleans cannot be);
-- ``ecos``: :func:`robofmu.system.interop.ssp.run_ssp_ecos` on the same SSP export (ecos's fixed-step
+- ``ecos``: :func:`robofmu.system.interop.ecos.run_ssp_ecos` on the same SSP export (ecos's fixed-step
   algorithm, the components stepped in parallel threads; Real outputs read through ecospy
   after every step);
 - ``container``: :func:`robofmu.system.interop.container.export_container` of the same diagram (one FMU,
@@ -82,7 +82,7 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
     if runner == "libcosim":
         import libcosimpy.CosimExecution  # noqa: F401  (loaded before the "imports" mark, as for the others)
     elif runner == "ecos":
-        from robofmu.system.interop.ssp import load_ecospy
+        from robofmu.system.interop.ecos import load_ecospy
 
         load_ecospy()
     imports_mb = _peak_mb()
@@ -94,11 +94,11 @@ def child(experiment: str, runner: str, h: float, stop: float, fmu_root: Path, s
 
         result = InProcessDiagram(system).sampled(h, stop)
     elif runner == "libcosim":
-        from robofmu.system.interop.ssp import run_ssp_libcosim
+        from robofmu.system.interop.libcosim import run_ssp_libcosim
 
         result = run_ssp_libcosim(ssp, stop, h)
     elif runner == "ecos":
-        from robofmu.system.interop.ssp import run_ssp_ecos
+        from robofmu.system.interop.ecos import run_ssp_ecos
 
         result = run_ssp_ecos(ssp, stop, h)
     elif runner == "container":

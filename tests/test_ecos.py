@@ -25,7 +25,8 @@ from robofmu.system import experiment
 from robofmu.system.plan import plan
 from robofmu.system.master import Master, SimulationError
 from robofmu.system.result import Result
-from robofmu.system.interop.ssp import NS, export_ssp, load_ecospy, run_ssp_ecos, ssd_text
+from robofmu.system.interop.ecos import load_ecospy, run_ssp_ecos
+from robofmu.system.interop.ssp import NS, export_ssp, ssd_text
 
 load_ecospy()           # the dev extra: a missing ecospy or libtbb.so.12 fails here, never skips
 

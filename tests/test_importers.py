@@ -117,7 +117,8 @@ RUNNERS = CHECKER + textwrap.dedent('''
     from pathlib import Path
     import numpy as np
     from robofmu.system.interop.libcosim import CosimRun
-    from robofmu.system.interop.ssp import run_ssp_fmpy, run_ssp_libcosim
+    from robofmu.system.interop.fmpy_ssp import run_ssp_fmpy
+    from robofmu.system.interop.libcosim import run_ssp_libcosim
 
     mode, out, stop, h, jobs = sys.argv[1], Path(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), json.loads(sys.argv[5])
     fmu_root = sys.argv[6]

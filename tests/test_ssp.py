@@ -57,8 +57,9 @@ from robofmu.components.robots import load_description, load_model
 from robofmu.system import experiment as experiments
 from robofmu.system.experiment import load
 from robofmu.system.master import Master
-from robofmu.system.interop.ssp import (NS, element_names, export_ssp, run_ssp_fmpy, run_ssp_libcosim, ssd_text,
-                                ssp_identifier)
+from robofmu.system.interop.fmpy_ssp import run_ssp_fmpy
+from robofmu.system.interop.libcosim import run_ssp_libcosim
+from robofmu.system.interop.ssp import NS, element_names, export_ssp, ssd_text, ssp_identifier
 
 STOP = 2.0                  # s: chess: first move (0-1 s), pause, start of the second move
 STEPS = (1e-3, 5e-4)        # s

@@ -9,7 +9,7 @@ For one experiment :func:`compare_tools` runs
 - the SSP export (:mod:`robofmu.system.interop.ssp`) in libcosim and in ecos, where installed (the dev
   extra), against the master's Jacobi run: the joint positions (the experiment's ``q`` role)
   compared, a signal both tools record at the master's moments (ecos reads a feedthrough
-  block's outputs one step later: see :func:`~robofmu.system.interop.ssp.run_ssp_ecos`).
+  block's outputs one step later: see :func:`~robofmu.system.interop.ecos.run_ssp_ecos`).
 
 Each comparison is the largest absolute difference over the run, with the unit of the compared
 signals.
@@ -81,7 +81,9 @@ def compare_tools(system: System, stop_time: float, folder: Path) -> list[ToolRu
         Container (Gauss-Seidel), container (Jacobi), libcosim, ecos, in that order.
     """
     from robofmu.system.interop.container import export_container, run_container
-    from robofmu.system.interop.ssp import element_names, export_ssp, run_ssp_ecos, run_ssp_libcosim
+    from robofmu.system.interop.ecos import run_ssp_ecos
+    from robofmu.system.interop.libcosim import run_ssp_libcosim
+    from robofmu.system.interop.ssp import element_names, export_ssp
 
     folder = Path(folder)
     h = system.step

@@ -51,9 +51,31 @@ of Python. In a host that is not Python it finalizes the interpreter pythonfmu s
 point of ``exit()`` where pythonfmu's destructor would have. For other pythonfmu 0.7.0 FMUs
 (without robofmu's export library, or robofmu's built before it had this), there is
 :func:`guard_pythonfmu_exit` (called by every :class:`CosimRun` and by
-:func:`robofmu.system.interop.ssp.run_ssp_fmpy`, harmless beside the FMUs' own handler): it registers
+:func:`robofmu.system.interop.fmpy_ssp.run_ssp_fmpy`, harmless beside the FMUs' own handler): it registers
 :func:`release_pythonfmu_states` to run at interpreter exit, which calls the
 ``finalizePythonInterpreter`` of every pythonfmu library still loaded.
+
+An SSP package (:func:`run_ssp_libcosim`, ``CosimExecution.from_ssp_file`` ->
+``cosim_ssp_fixed_step_execution_create``):
+    - Loads a ``.ssp`` archive (or a folder/``.ssd``), FMUs by relative ``source``; reads
+      connector types (a connector without a type element is rejected), connections (with
+      ``ssc:LinearTransformation``), DefaultExperiment ``startTime`` and the OSP fixed-step
+      annotation; applies the **first** parameter set bound to each component (inline or
+      ``.ssv``) as initial values; a parameter it cannot apply is only logged as a warning.
+      It ignores ``stopTime``, system-level bindings and ParameterMapping.
+    - Components are stored in a hash map: slave indices do not follow the SSD order, so the
+      runner looks them up by instance name.
+    - Master algorithm: the fixed-step (Jacobi) algorithm. Initialization passes connected
+      values along in initialization mode (outputs read there), so the loop starts consistent
+      at t0 (tests/test_libcosim.py). Then at every step all slaves step from t with the inputs
+      transferred at t, outputs are read after the step and transferred: a feedthrough block's
+      output at t + h is computed from its inputs at t. The reference reaches the plant two
+      steps late (ik, controller each hold one), the measured q one step late; controller ->
+      plant adds no delay of its own (the plant has no feedthrough: it steps from t with the
+      torque read at t, as in Gauss-Seidel).
+    - Time is integer nanoseconds: no drift. Only Real variables can be recorded as time
+      series; Boolean outputs are not in the Result. A FMU failing initialization aborts the
+      process (see system/interop/libcosim.py).
 """
 from __future__ import annotations
 
@@ -61,11 +83,16 @@ import atexit
 import ctypes
 import os
 import sys
+import time as _time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from robofmu.system import defaults
-from robofmu.system.diagram import coerce, expand, spread
+from robofmu.system.diagram import coerce, expand, select, spread
+from robofmu.system.plan import step_count
+from robofmu.system.result import Result
 
 NANO = 1_000_000_000
 _FMI_TYPES = {"REAL": "Real", "INTEGER": "Integer", "BOOLEAN": "Boolean", "STRING": "String"}   # libcosim -> FMI
@@ -185,7 +212,7 @@ def guard_pythonfmu_exit() -> None:
 
     Python runs atexit handlers before the C library's exit handlers, so the release comes
     before pythonfmu's destructors. Called by every :class:`CosimRun` and by
-    :func:`robofmu.system.interop.ssp.run_ssp_fmpy`. robofmu's FMUs need it nowhere (their export
+    :func:`robofmu.system.interop.fmpy_ssp.run_ssp_fmpy`. robofmu's FMUs need it nowhere (their export
     library releases the state itself, see the module notes); call it yourself when you run
     other pythonfmu 0.7.0 FMUs with fmpy or libcosimpy directly.
     """
@@ -483,3 +510,46 @@ def _enum_name(enum: str, value: int) -> str:
     from libcosimpy import CosimEnums
 
     return getattr(CosimEnums, enum)(value).name
+
+
+def run_ssp_libcosim(path: str | Path, stop_time: float, step: float, start_time: float = 0.0,
+                     record: list[str] | None = None, log_level: str | None = "WARNING") -> Result:
+    """Simulate an SSP with libcosim's fixed-step algorithm (see the module notes).
+
+    ``start_time`` must be the SSD's DefaultExperiment start time (libcosim starts there).
+    Returns a :class:`~robofmu.system.result.Result` with the Real outputs matching ``record``
+    (fnmatch patterns on ``instance.variable``; default all Real outputs) at t0, t0 + h, ..,
+    t0 + n h, recorded by a time-series observer (Boolean outputs cannot be recorded).
+    """
+    path = Path(path)
+    n = step_count(start_time, stop_time, step)
+    run = CosimRun.from_ssp(path, step, log_level, last_value=False)
+    try:
+        t0 = run.execution.status().current_time / NANO
+        if abs(t0 - start_time) > 1e-9:
+            raise ValueError(f"{path.name} starts at t = {t0} s, not {start_time} s")
+        candidates = [(inst, v.name) for inst, slave in run.slaves.items() for v in slave.variables.values()
+                      if v.causality == "OUTPUT" and v.type == "REAL"]
+        candidates.sort(key=lambda c: (run.slaves[c[0]].index, run.slaves[c[0]].variables[c[1]].reference))
+        columns = [f"{i}.{v}" for i, v in candidates]
+        keep = [candidates[k] for k in select(columns, record)]
+        for inst, name in keep:
+            run.observe_series(inst, name, buffer_size=n + 1)
+        wall = _time.perf_counter()
+        run.step(n)
+        wall = _time.perf_counter() - wall
+        data = np.empty((n + 1, len(keep)))
+        times = None
+        for j, (inst, name) in enumerate(keep):
+            t, steps, values = run.series(inst, name, count=n + 1)
+            if len(values) != n + 1:
+                raise RuntimeError(f"libcosim recorded {len(values)} samples of {inst}.{name}, expected {n + 1}")
+            data[:, j] = values
+            times = np.asarray(t)
+        if times is None:
+            times = start_time + step * np.arange(n + 1)
+        return Result(times, [f"{i}.{v}" for i, v in keep], data,
+                      {"tool": "libcosim", "algorithm": "jacobi (libcosim fixed-step)", "step": step,
+                       "wall_time": wall})
+    finally:
+        run.close()

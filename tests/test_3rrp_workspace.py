@@ -1,4 +1,4 @@
-"""The workspace analysis (system/studies/workspace.py) on the planar 3-RRP mechanism: radii, orientation
+"""The workspace analysis (system/studies/workspace/) on the planar 3-RRP mechanism: radii, orientation
 range, isotropy, GII over regions and over refined full joint grids, and the CLI's mistakes.
 
 Run time is not asserted (the report states it)."""
@@ -45,7 +45,7 @@ def test_radii_within_a_thousandth(model):
 def test_a_grid_alone_is_coarse_but_zoom_refines(model, monkeypatch):
     """Without the zoom, a grid of 90 orientations misses the reachable radius by more than 0.1 %
     (the maximum is a corner of the per-orientation reach); the dexterous one is a smooth minimum."""
-    monkeypatch.setattr(workspace, "ZOOM_LEVELS", 0)
+    monkeypatch.setattr(workspace.measures, "ZOOM_LEVELS", 0)
     r = model.r
     radii = workspace.radii(model, (0.0, 0.0), rays=36, orientations=90)
     assert radii.reachable.min() < 2.0 * r / math.sqrt(3.0) * (1 - 1e-3)

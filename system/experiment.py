@@ -43,7 +43,6 @@ does not exist, an unknown loop or profile, an input two blocks could drive.
 """
 from __future__ import annotations
 
-import difflib
 import math
 import os
 import tomllib
@@ -53,6 +52,7 @@ from pathlib import Path
 from robofmu.components.blocks import block_type
 from robofmu.components.robots import RobotDescription, is_robot_file, load_description, load_model
 from robofmu.components.robots.description import PROFILE_PREFIX
+from robofmu.components.toml_keys import unknown_key
 
 from robofmu.system import defaults
 from robofmu.system.diagram import System, Wire, expand, parameter_address
@@ -177,9 +177,7 @@ def _wrong(path: Path, key: str, expected: str, value) -> ExperimentError:
 
 
 def _unknown(path: Path, key: str, known, where: str = "") -> ExperimentError:
-    close = difflib.get_close_matches(key, list(known), n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(known)})"
-    return ExperimentError(path, f"{where}{key}", f"unknown key{hint}")
+    return ExperimentError(path, f"{where}{key}", unknown_key(key, known))
 
 
 def _check_file(path: Path, data: dict) -> None:

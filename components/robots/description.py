@@ -99,6 +99,7 @@ from typing import Any
 
 from ..control import GAINS, check_gains
 from ..parameters import ParameterError
+from ..toml_keys import unknown_key
 
 __all__ = ["DescriptionError", "Gains", "TaskSpace", "Payload", "Choice", "Planar3RRPMechanism",
            "MECHANISMS", "RobotDescription", "read"]
@@ -423,7 +424,7 @@ class _Table:
     def unknown(self, known: set[str]) -> None:
         extra = sorted(set(self.data) - known)
         if extra:
-            self.fail(extra[0], f"unknown key (known: {', '.join(sorted(known))})")
+            self.fail(extra[0], unknown_key(extra[0], known))
 
 
 _REQUIRED = object()

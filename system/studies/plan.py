@@ -16,6 +16,7 @@ import typing
 from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 from pathlib import Path
 
+from robofmu.components.toml_keys import unknown_key
 from robofmu.system.usage import UsageError
 
 __all__ = ["PLAN", "DemoPlan", "ExperimentSection", "WorkspaceEntry", "RobustnessStudy", "SampledLoopStudy",
@@ -192,7 +193,7 @@ def _table(cls, data, where: _Where, **given):
     keys = [f for f in fields(cls) if f.name not in given]
     unknown = sorted(set(data) - {f.name for f in keys})
     if unknown:
-        _fail(where.file, where.at(unknown[0]).key, f"unknown key (known: {', '.join(sorted(f.name for f in keys))})")
+        _fail(where.file, where.at(unknown[0]).key, unknown_key(unknown[0], (f.name for f in keys)))
     values = dict(given)
     for f in keys:
         if f.name in data:

@@ -165,16 +165,18 @@ def test_cli_runs_a_study_file(tmp_path):
     (["3rrp", "--grid", "5000"], ["--grid 5000: must be"]),
     (["missing.toml"], ["missing.toml: no such study file"]),
     (["bad.toml"], ["bad.toml: grids.rays: missing key"]),
+    (["typo.toml"], ["typo.toml: centr: unknown key (known: ", "did you mean 'centre'?"]),
     (["serial.toml"], ["serial.toml: robot: robot 'rrp'", "no vectorized kinematics"]),
     (["3rrp", "--out", "afile"], ["--out afile: exists and is a file"]),
     (["3rrp", "--out", "mine"], ["--out mine: holds notes.txt"]),
-], ids=["serial-robot", "unknown-robot", "grid-too-small", "grid-too-large", "missing-study", "study-key",
+], ids=["serial-robot", "unknown-robot", "grid-too-small", "grid-too-large", "missing-study", "study-key", "study-typo",
         "study-of-a-serial-robot", "out-is-a-file", "out-holds-other-files"])
 def test_cli_mistakes_are_one_line_with_status_2(tmp_path, args, fragments):
     (tmp_path / "afile").write_text("x\n")
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("my notes\n")
     (tmp_path / "bad.toml").write_text(SMALL.replace("rays = 12\n", ""))
+    (tmp_path / "typo.toml").write_text("centr = [0.0, 0.0]\n" + SMALL)
     (tmp_path / "serial.toml").write_text(SMALL.replace('robot = "3rrp"', 'robot = "rrp"'))
     done = cli("workspace", *args, cwd=tmp_path)
     lines = [line for line in done.stderr.splitlines() if line.strip()]

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 
+from robofmu.components.toml_keys import unknown_key
 from robofmu.system.studies.tables import STUDIES_DIR
 from robofmu.system.studies.workspace.measures import CHUNK, ZOOM_POINTS, Region
 from robofmu.system.usage import UsageError, check_memory
@@ -33,6 +34,23 @@ class Study:
     regions: list[Region]
     expected: dict = field(default_factory=dict)
     notes: dict = field(default_factory=dict)
+
+
+#: The keys of a workspace study file, of its [grids], [expected], [notes] and of each [[regions]].
+TOP_KEYS = ("kind", "robot", "title", "text", "characteristic_length", "characteristic_length_text", "centre",
+            "theta", "grids", "regions", "expected", "notes")
+GRID_KEYS = ("positions", "orientations", "isotropy_positions", "isotropy_orientations", "rays", "ray_orientations",
+             "joint", "region")
+OPTIONAL_KEYS = {"expected": ("reachable", "reachable_text", "dexterous", "dexterous_text"),
+                 "notes": ("full_grid",)}
+REGION_KEYS = ("name", "radius", "theta")
+
+
+def _known(table: dict, known, path: Path, where: str = "") -> None:
+    """Refuse the first key of ``table`` that is not ``known`` (a typo would otherwise be a default)."""
+    for key in table:
+        if key not in known:
+            raise UsageError(f"{path}: {where}{key}: {unknown_key(key, known)}")
 
 
 def _need(table: dict, key: str, kinds, path: Path, where: str = ""):
@@ -67,7 +85,11 @@ def read_study(path: str | Path) -> Study:
         raise UsageError(f"{path}: invalid TOML: {exc}") from None
     if data.get("kind") != "workspace":
         raise UsageError(f"{path}: kind: must be \"workspace\", got {data.get('kind')!r}")
+    _known(data, TOP_KEYS, path)
     grids = _need(data, "grids", dict, path)
+    _known(grids, GRID_KEYS, path, "grids.")
+    for table in ("expected", "notes"):
+        _known(_need(data, table, dict, path) if table in data else {}, OPTIONAL_KEYS[table], path, f"{table}.")
     for key in ("positions", "orientations", "isotropy_positions", "isotropy_orientations", "rays",
                 "ray_orientations"):
         if _need(grids, key, int, path, "grids.") < 4:
@@ -89,6 +111,7 @@ def read_study(path: str | Path) -> Study:
         where = f"regions[{i}]."
         if not isinstance(entry, dict):
             raise UsageError(f"{path}: regions[{i}]: must be a table, got {entry!r}")
+        _known(entry, REGION_KEYS, path, where)
         radius = float(_need(entry, "radius", (int, float), path, where))
         window = _need(entry, "theta", list, path, where)
         if not (len(window) == 2 and all(isinstance(v, (int, float)) for v in window)

@@ -9,6 +9,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from .unknown_names import nearest
+
 #: The values an Integer parameter may take: a FMU's Integer is an fmi2Integer, 32-bit signed.
 INTEGER_RANGE = (-2**31, 2**31 - 1)
 
@@ -123,7 +125,8 @@ def resolve(declared: tuple[Parameter, ...], given: dict[str, Any], where: str =
     names = {p.name for p in declared}
     unknown = sorted(set(given) - names)
     if unknown:
-        raise ParameterError(unknown[0], f"unknown parameter {unknown[0]!r} (known: {', '.join(sorted(names)) or 'none'})")
+        raise ParameterError(unknown[0], f"unknown parameter {unknown[0]!r} (known: {', '.join(sorted(names)) or 'none'})"
+                                         + nearest(unknown[0], names))
     values = {}
     for p in declared:
         value = given.get(p.name, p.default)

@@ -46,6 +46,12 @@ def expand(names, base: str) -> list[str]:
     return [n for _, n in found]
 
 
+def bases(names) -> list[str]:
+    """The vector bases and scalar names among ``names`` (``q[1]``, ``q[2]``, ``kp`` -> ``q``,
+    ``kp``), each once, in order of first appearance."""
+    return list(dict.fromkeys(m.group(1) if (m := _INDEXED.match(n)) else n for n in names))
+
+
 def matching(columns: list[str], entry: str) -> list[int]:
     """Indices of the ``columns`` (``instance.variable``) one record entry names.
 

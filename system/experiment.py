@@ -52,7 +52,7 @@ from pathlib import Path
 from robofmu.components.blocks import block_type
 from robofmu.components.robots import RobotDescription, is_robot_file, load_description, load_model
 from robofmu.components.robots.description import PROFILE_PREFIX
-from robofmu.components.toml_keys import unknown_key
+from robofmu.components.unknown_names import unknown_key
 
 from robofmu.system import defaults
 from robofmu.system.diagram import System, Wire, expand, parameter_address

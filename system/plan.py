@@ -27,7 +27,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from robofmu.system.diagram import BlockSpec, System, coerce, expand, select, spread, unmatched
+from robofmu.components.unknown_names import nearest
+from robofmu.system.diagram import BlockSpec, System, bases, coerce, expand, select, spread, unmatched
 
 __all__ = ["DiagramError", "Link", "Node", "Plan", "Times", "available_memory", "described", "gigabytes",
            "memory_shortfall", "plan", "single_rate", "start_values", "step_count", "times", "variable_unit"]
@@ -495,7 +496,9 @@ def _parameter_problems(system: System, nodes: dict[str, Node]) -> list[str]:
         for base, value in spec.parameters.items():
             names = expand(node.variables, base)
             if not names:
-                problems.append(f"block {spec.name!r}: unknown parameter {base!r} in {node.path.name}")
+                settable = [n for n, v in node.variables.items() if v.causality in ("parameter", "input")]
+                problems.append(f"block {spec.name!r}: unknown parameter {base!r} in {node.path.name}"
+                                + nearest(base, bases(settable)))
                 continue
             if any(node.variables[name].causality not in ("parameter", "input") for name in names):
                 problems.append(f"block {spec.name!r}: {base!r} is a {node.variables[names[0]].causality}, "

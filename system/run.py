@@ -219,6 +219,20 @@ def reference_check(system: System, master: Master, parameters: dict, step: floa
     return None
 
 
+def _settings_at_fault(parameters: dict, problems: list[str]) -> str:
+    """The ``--set`` entries the plan's problems are all about (``plant.q00=1``), or "" where a
+    problem is the experiment file's own: a mistake is told where the user made it."""
+    def about(problem: str, name: str) -> bool:
+        block, parameter = parameter_address(name)
+        return problem.startswith(f"block {block!r}: ") and (repr(parameter) in problem
+                                                              or problem.startswith(f"block {block!r}: {parameter} ="))
+
+    if not parameters or not all(any(about(p, name) for name in parameters) for p in problems):
+        return ""
+    return ", ".join(f"{name}={value:g}" if isinstance(value, float) else f"{name}={value}"
+                     for name, value in parameters.items() if any(about(p, name) for p in problems))
+
+
 def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = defaults.FMU_FOLDER, step: float | None = None,
                    stop_time: float | None = None, algorithm: str | None = None, progress: bool = True,
                    figures: bool = True, parameters: dict | None = None, results_format: str = "csv",
@@ -288,7 +302,8 @@ def run_experiment(name: str, out_dir: str | Path, fmu_dir: str | Path = default
     try:
         warnings = master.check(run_times)
     except DiagramError as exc:
-        raise DiagramError(str(system.source or system.name), exc.problems) from None
+        given = _settings_at_fault(parameters or {}, exc.problems)
+        raise DiagramError(f"--set {given}" if given else str(system.source or system.name), exc.problems) from None
     roles = check_roles(system, master)
     if master.plan.memory:
         raise UsageError(f"{times_given(system, step, stop_time)}: {master.plan.memory}; use a larger --step-size "

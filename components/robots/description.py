@@ -99,7 +99,7 @@ from typing import Any
 
 from ..control import GAINS, check_gains
 from ..parameters import ParameterError
-from ..toml_keys import unknown_key
+from ..unknown_names import unknown_key
 
 __all__ = ["DescriptionError", "Gains", "TaskSpace", "Payload", "Choice", "Planar3RRPMechanism",
            "MECHANISMS", "RobotDescription", "read"]

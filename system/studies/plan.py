@@ -16,7 +16,7 @@ import typing
 from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 from pathlib import Path
 
-from robofmu.components.toml_keys import unknown_key
+from robofmu.components.unknown_names import unknown_key
 from robofmu.system.usage import UsageError
 
 __all__ = ["PLAN", "DemoPlan", "ExperimentSection", "WorkspaceEntry", "RobustnessStudy", "SampledLoopStudy",

@@ -25,7 +25,8 @@ from pathlib import Path
 
 from robofmu.system import defaults, experiment
 from robofmu.system.plan import plan, variable_unit
-from robofmu.system.diagram import coerce, expand
+from robofmu.components.unknown_names import nearest
+from robofmu.system.diagram import bases, coerce, expand
 from robofmu.system.master import DiagramError, Master
 from robofmu.system.roles import check_roles
 from robofmu.system.sweep.design import STEP_SIZE_AXIS, Design
@@ -125,8 +126,9 @@ def check(design: Design, fmu_dir):
         node = base.nodes[axis.block]
         variables = [node.variables[v] for v in expand(node.variables, axis.parameter)]
         if not variables:
+            parameters = bases(n for n, v in node.variables.items() if v.causality == "parameter")
             raise UsageError(f"--vary {axis.name}: unknown parameter {axis.parameter!r} of block {axis.block!r} "
-                             f"({node.path.name})")
+                             f"({node.path.name}){nearest(axis.parameter, parameters)}")
         if any(v.causality != "parameter" for v in variables):
             raise UsageError(f"--vary {axis.name}: {axis.parameter!r} of {axis.block} is not a parameter")
         kinds[axis.name] = variables[0].type

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 
-from robofmu.components.toml_keys import unknown_key
+from robofmu.components.unknown_names import unknown_key
 from robofmu.system.studies.tables import STUDIES_DIR
 from robofmu.system.studies.workspace.measures import CHUNK, ZOOM_POINTS, Region
 from robofmu.system.usage import UsageError, check_memory

@@ -438,6 +438,18 @@ class CosimRun:
             out.append(value.decode() if isinstance(value, bytes) else value)
         return out[0] if name in self._slave(instance).variables else out
 
+    def observe_real_outputs(self, record: list[str] | None, steps: int) -> list[tuple[str, str]]:
+        """Observe, ``steps + 1`` samples each, the Real outputs matching ``record`` (fnmatch
+        patterns on ``instance.variable``; default all), in the order of the slaves and of their
+        value references; returns them as (instance, variable)."""
+        candidates = [(inst, v.name) for inst, slave in self.slaves.items() for v in slave.variables.values()
+                      if v.causality == "OUTPUT" and v.type == "REAL"]
+        candidates.sort(key=lambda c: (self.slaves[c[0]].index, self.slaves[c[0]].variables[c[1]].reference))
+        keep = [candidates[k] for k in select([f"{i}.{v}" for i, v in candidates], record)]
+        for inst, name in keep:
+            self.observe_series(inst, name, buffer_size=steps + 1)
+        return keep
+
     def observe_series(self, instance: str, name: str, buffer_size: int = 100_000) -> None:
         """Record every step's value of Real variable(s) with a (buffered) time-series observer."""
         from libcosimpy.CosimEnums import CosimVariableType
@@ -528,13 +540,7 @@ def run_ssp_libcosim(path: str | Path, stop_time: float, step: float, start_time
         t0 = run.execution.status().current_time / NANO
         if abs(t0 - start_time) > 1e-9:
             raise ValueError(f"{path.name} starts at t = {t0} s, not {start_time} s")
-        candidates = [(inst, v.name) for inst, slave in run.slaves.items() for v in slave.variables.values()
-                      if v.causality == "OUTPUT" and v.type == "REAL"]
-        candidates.sort(key=lambda c: (run.slaves[c[0]].index, run.slaves[c[0]].variables[c[1]].reference))
-        columns = [f"{i}.{v}" for i, v in candidates]
-        keep = [candidates[k] for k in select(columns, record)]
-        for inst, name in keep:
-            run.observe_series(inst, name, buffer_size=n + 1)
+        keep = run.observe_real_outputs(record, n)
         wall = _time.perf_counter()
         run.step(n)
         wall = _time.perf_counter() - wall

@@ -52,7 +52,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from robofmu.system.diagram import System, select
+from robofmu.system.diagram import System
 from robofmu.system.interop.ssp import fmu_names, parameter_values, xml_bytes
 from robofmu.system.plan import plan, step_count
 from robofmu.system.result import Result
@@ -177,13 +177,7 @@ def run_osp_libcosim(path: str | Path, stop_time: float | None = None, record: l
     n = step_count(start, stop, step)
     run = CosimRun.from_osp(config, step, log_level, last_value=False)
     try:
-        candidates = [(inst, v.name) for inst, slave in run.slaves.items() for v in slave.variables.values()
-                      if v.causality == "OUTPUT" and v.type == "REAL"]
-        candidates.sort(key=lambda c: (run.slaves[c[0]].index, run.slaves[c[0]].variables[c[1]].reference))
-        columns = [f"{i}.{v}" for i, v in candidates]
-        keep = [candidates[k] for k in select(columns, record)]
-        for inst, name in keep:
-            run.observe_series(inst, name, buffer_size=n + 1)
+        keep = run.observe_real_outputs(record, n)
         wall = _time.perf_counter()
         run.step(n)
         wall = _time.perf_counter() - wall
